@@ -1,0 +1,35 @@
+"""polyjax: fit reflectance models (BRDFs) to measured data in JAX.
+
+Implements Ozturk, Kurt, Bilgili, Gungor, "Linear approximation of Bidirectional Reflectance
+Distribution Functions", Computers & Graphics 32 (2008): a polynomial response surface in the
+principal components of explanatory variables of (u, v), fitted in closed form by weighted
+least squares. Enable float64 in your entry point (``jax.config.update("jax_enable_x64", True)``)
+for fitting; polyjax does not change global JAX settings on import.
+"""
+
+from . import data
+from ._approx import ApproximationError, approximation_error
+from ._basis import design_matrix, exponents, n_terms
+from ._config import DATA_ENV, data_root, has_data_root
+from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
+from ._fit import fit_polynomial, n_parameters
+from ._geometry import cartesian_to_spherical, cos_theta, cutoff_mask, half_vector, reflect, safe_normalize, spherical_to_cartesian
+from ._io import load_model, save_model
+from ._lstsq import LstsqSolution, weighted_lstsq
+from ._measurements import Measurements, make_measurements
+from ._metrics import fit_weights, l2_error, psnr
+from ._model import FitStatus, PolynomialBRDF, evaluate_paper_form
+from ._pca import PCA, fit_pca
+from ._variables import VariableSet, explanatory_variables, get_variables, register_variables, variable_sets
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
+    "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "UnknownNameError", "VariableSet",
+    "approximation_error", "cartesian_to_spherical", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
+    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
+    "get_variables", "half_vector", "has_data_root", "l2_error", "load_model", "make_measurements", "n_parameters",
+    "n_terms", "psnr", "reflect", "register_variables", "safe_normalize", "save_model", "spherical_to_cartesian",
+    "variable_sets", "weighted_lstsq",
+]

@@ -1,0 +1,282 @@
+"""Fitting the polynomial model (paper, section 4): one jitted, batched weighted least-squares solve."""
+
+from __future__ import annotations
+
+import functools
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import ArrayLike
+
+from ._basis import BASES, design_matrix, n_terms, term_degrees
+from ._errors import FitError, InputError
+from ._geometry import safe_normalize
+from ._lstsq import METHODS, weighted_lstsq
+from ._measurements import Measurements
+from ._metrics import fit_weights
+from ._model import FitStatus, PolynomialBRDF
+from ._pca import fit_pca
+from ._variables import get_variables
+
+
+def _is_tracer(x) -> bool:
+    return isinstance(x, jax.core.Tracer)
+
+
+def _design_for(x, keep, max_degree, basis, interactions):
+    """PCA of the kept samples, affine scaling, and the design matrix (equation (13))."""
+    pca = fit_pca(x, keep)
+    z = pca(x)
+    k = x.shape[-1]
+    if basis == "legendre":
+        big = jnp.finfo(x.dtype).max
+        lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
+        hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
+        any_kept = jnp.any(keep)
+        lo = jnp.where(any_kept, lo, -1.0)
+        hi = jnp.where(any_kept, hi, 1.0)
+        centre = 0.5 * (lo + hi)
+        hw = 0.5 * (hi - lo)
+        tiny = 1e3 * jnp.finfo(x.dtype).eps * jnp.maximum(1.0, jnp.abs(centre))
+        hw = jnp.where(hw > tiny, hw, 1.0)  # a constant component: its column duplicates the intercept
+    else:
+        centre = jnp.zeros((k,), x.dtype)
+        hw = jnp.ones((k,), x.dtype)
+    d = design_matrix((z - centre) / hw, max_degree, basis, interactions)
+    return pca, centre, hw, d
+
+
+@functools.partial(
+    jax.jit,
+    static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "shared"),
+)
+def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, basis, interactions, method, rcond,
+                cutoff_deg, shared):
+    """values (B, n); weights, mask (B or 1, n); degrees (D,) -> dict of (D, B, ...) arrays."""
+    x = get_variables(variables).fn(u, v)
+    k = x.shape[-1]
+    dtype = values.dtype
+    mask = mask & jnp.isfinite(values)
+    values = jnp.where(mask, values, 0.0)
+    w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)  # (B or 1, n)
+    tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
+    active = tdeg[None, :] <= degrees[:, None]  # (D, m)
+    n_deg = degrees.shape[0]
+
+    def residual_l2(d, coef, y, wl, wc2l):  # coef (m,) ; y (n,)
+        r = y - d @ coef
+        den = jnp.sum(wl)
+        return jnp.where(den > 0, jnp.sqrt(jnp.sum(wc2l * r * r) / jnp.where(den > 0, den, 1.0)), jnp.inf)
+
+    def lane(y, wl, wc2l):
+        """One set of samples (B_l right-hand sides sharing it) fitted for all degrees."""
+        keep = wl > 0
+        pca, centre, hw, d = _design_for(x, keep, max_degree, basis, interactions)
+        sol = jax.vmap(lambda a: weighted_lstsq(d, y.T, wc2l, a, method=method, rcond=rcond))(active)
+        coef = jnp.swapaxes(sol.coefficients, 1, 2)  # (D, r, m)
+        l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l), in_axes=(0, 0)), in_axes=(0, None))(coef, y)
+        return pca, centre, hw, coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
+
+    if shared:
+        pca, centre, hw, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+        nb = values.shape[0]
+        bc = lambda a: jnp.broadcast_to(a, (n_deg, nb) + a.shape)  # noqa: E731
+        out_pca = (bc(pca.mean), bc(pca.rotation), bc(centre), bc(hw))
+        rank = jnp.broadcast_to(rank[:, None], (n_deg, nb))
+        cond = jnp.broadcast_to(cond[:, None], (n_deg, nb))
+        n_act = jnp.broadcast_to(n_act[:, None], (n_deg, nb))
+        n_used = jnp.broadcast_to(n_used, (n_deg, nb))
+    else:
+        res = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))(values, w, wc2)
+        pca, centre, hw, coef, l2, rank, cond, n_act, n_used = res
+        # lane returns (D, 1, ...) for coefficients / l2; move D first
+        coef = jnp.swapaxes(coef[:, :, 0], 0, 1)
+        l2 = jnp.swapaxes(l2[:, :, 0], 0, 1)
+        rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
+        bc = lambda a: jnp.broadcast_to(a[None], (n_deg,) + a.shape)  # noqa: E731
+        out_pca = (bc(pca.mean), bc(pca.rotation), bc(centre), bc(hw))
+        n_used = jnp.broadcast_to(n_used[None], (n_deg,) + n_used.shape)
+    status = jnp.where(
+        n_used == 0, FitStatus.NO_SAMPLES, jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)
+    ).astype(jnp.int32)
+    coef = jnp.where((n_used == 0)[..., None], 0.0, coef)
+    degs = jnp.broadcast_to(degrees[:, None], status.shape)
+    return dict(
+        coefficients=coef.astype(dtype), degree=degs.astype(jnp.int32), mean=out_pca[0], rotation=out_pca[1],
+        centre=out_pca[2], halfwidth=out_pca[3], l2=l2, rank=rank, condition=cond, n_used=n_used.astype(jnp.int32),
+        status=status,
+    )
+
+
+def _rows_equal(a: np.ndarray) -> bool:
+    flat = a.reshape(-1, a.shape[-1])
+    return bool(np.all(flat == flat[:1]))
+
+
+def fit_polynomial(
+    u,
+    v: ArrayLike | None = None,
+    values: ArrayLike | None = None,
+    variables: str = "lafortune",
+    degree: int | Sequence[int] = 5,
+    *,
+    weights: ArrayLike | None = None,
+    mask: ArrayLike | None = None,
+    cutoff_deg: float | None = 80.0,
+    basis: str = "legendre",
+    interactions: bool = False,
+    method: str = "qr",
+    rcond: float | None = None,
+    rank_deficient: str = "flag",
+    nonfinite: str = "error",
+) -> PolynomialBRDF:
+    r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
+
+    Minimises the Ngan et al. objective of equation (11),
+    ``sum_i w_i cos^2(theta_u,i) (b_i - f(u_i, v_i))^2``, over the samples with ``theta_u`` and
+    ``theta_v`` at most ``cutoff_deg``. The explanatory variables (section 3) are transformed to
+    principal components over those samples, the design of equation (13) is built, and the
+    solve is QR + SVD of the square-root-weighted design (:func:`polyjax.weighted_lstsq`).
+
+    Args:
+        u: ``(n, 3)`` light directions, or a :class:`polyjax.Measurements` (then ``v``/``values``
+           and its ``weights``/``mask`` are taken from it).
+        v: ``(n, 3)`` view directions.
+        values: ``(*batch, n)`` measured BRDF, samples last; every leading axis (materials, channels)
+           is fitted independently in the same call.
+        variables: a registered variable set: ``"ward"``, ``"ashikhmin-shirley"``, ``"lafortune"``,
+           ``"lafortune-anisotropic"`` or a user's own.
+        degree: ``p``, or a sequence of degrees: the result then has a leading degree axis.
+        weights: solid-angle weights ``w_i`` (``(n,)`` or ``(*batch, n)``), ones by default.
+        mask: ``(*batch, n)`` validity mask; False samples are not fitted.
+        cutoff_deg: grazing cutoff in degrees (80 in the paper); None keeps all samples above the horizon.
+        basis: ``"legendre"`` (default, well conditioned) or ``"monomial"`` (the paper's literal powers);
+           both span the same space and give the same fit.
+        interactions: fit the full response surface of equation (2) instead of equation (3).
+        method: ``"qr"`` (default) or ``"svd"``.
+        rcond: relative singular-value cutoff for the rank; default ``eps * max(n, m)``.
+        rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
+           (raise :class:`polyjax.FitError`). Lanes with no samples are always flagged ``NO_SAMPLES``
+           (L2 = inf) and raise under ``"error"``.
+        nonfinite: ``"error"`` (raise on NaN/inf in ``values``) or ``"mask"`` (drop those samples).
+
+    Returns:
+        :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
+        degree axis when ``degree`` is a sequence).
+    """
+    if isinstance(u, Measurements):
+        data = u
+        if values is not None or (v is not None and not isinstance(v, str)):
+            raise InputError("fit_polynomial(measurements, ...): pass the other arguments by keyword")
+        if isinstance(v, str):
+            variables = v
+        u, v, values = data.u, data.v, data.values
+        weights = data.weights if weights is None else weights
+        mask = data.mask if mask is None else mask
+    if v is None or values is None:
+        raise InputError("fit_polynomial: expected u, v and values (or a Measurements)")
+    vs = get_variables(variables)
+    if basis not in BASES:
+        raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
+    if method not in METHODS:
+        raise InputError(f"method: expected one of {METHODS}, found {method!r}")
+    if rank_deficient not in ("flag", "error"):
+        raise InputError(f"rank_deficient: expected 'flag' or 'error', found {rank_deficient!r}")
+    if nonfinite not in ("error", "mask"):
+        raise InputError(f"nonfinite: expected 'error' or 'mask', found {nonfinite!r}")
+    if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
+        raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
+    scalar_degree = np.ndim(degree) == 0
+    degrees = np.atleast_1d(np.asarray(degree))
+    if degrees.ndim != 1 or degrees.size == 0 or not np.issubdtype(degrees.dtype, np.integer) or np.any(degrees < 0):
+        raise InputError(f"degree: expected a non-negative integer or a sequence of them, found {degree!r}")
+    max_degree = int(degrees.max())
+
+    values = jnp.asarray(values)
+    if not jnp.issubdtype(values.dtype, jnp.floating):
+        values = values.astype(jnp.result_type(float))
+    dtype = values.dtype
+    u = jnp.asarray(u, dtype)
+    v = jnp.asarray(v, dtype)
+    for name, w in (("u", u), ("v", v)):
+        if w.ndim != 2 or w.shape[-1] != 3:
+            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
+    if u.shape != v.shape:
+        raise InputError(f"u and v: expected the same shape (n, 3), found {u.shape} and {v.shape}")
+    n = u.shape[0]
+    if values.ndim < 1 or values.shape[-1] != n:
+        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
+    batch = values.shape[:-1]
+    concrete = not any(_is_tracer(a) for a in (u, v, values, weights, mask))
+
+    if concrete:
+        for name, w in (("u", u), ("v", v)):
+            if not bool(jnp.all(jnp.isfinite(w))):
+                raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    dir_ok = ok_u & ok_v
+    m = jnp.broadcast_to(dir_ok, values.shape) if mask is None else jnp.broadcast_to(jnp.asarray(mask, bool) & dir_ok, values.shape)
+    if concrete:
+        finite = np.isfinite(np.asarray(values))
+        if not finite.all():
+            if nonfinite == "error":
+                bad = np.argwhere(~finite)[0]
+                raise InputError(
+                    f"values: expected finite numbers, found {int((~finite).sum())} NaN/inf "
+                    f"(first at index {tuple(int(i) for i in bad)}); pass nonfinite='mask' to drop them"
+                )
+    w = jnp.ones((n,), dtype) if weights is None else jnp.asarray(weights, dtype)
+    if w.shape[-1] != n or (w.ndim > 1 and w.shape != values.shape):
+        raise InputError(f"weights: expected shape ({n},) or {values.shape}, found {w.shape}")
+    if concrete and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
+        raise InputError("weights: expected finite, non-negative solid-angle weights")
+
+    nb = int(np.prod(batch)) if batch else 1
+    values2 = values.reshape(nb, n)
+    m2 = m.reshape(nb, n) & jnp.isfinite(values2)
+    w2 = w.reshape(-1, n)
+    shared = False
+    if concrete:
+        m_np = np.asarray(m2)
+        w_np = np.asarray(w2)
+        if _rows_equal(m_np) and _rows_equal(w_np):
+            shared = True
+            m2, w2 = m2[:1], w2[:1]
+    if not shared:
+        w2 = jnp.broadcast_to(w2, (nb, n))
+
+    out = _fit_kernel(
+        u, v, values2, w2, m2, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
+        interactions=bool(interactions), method=method, rcond=rcond,
+        cutoff_deg=None if cutoff_deg is None else float(cutoff_deg), shared=shared,
+    )
+    lead = (degrees.size,) if not scalar_degree else ()
+
+    def shape(a):
+        a = a.reshape((degrees.size,) + batch + a.shape[2:])
+        return a[0] if scalar_degree else a.reshape(lead + batch + a.shape[len(batch) + 1 :])
+
+    model = PolynomialBRDF(
+        **{key: shape(a) for key, a in out.items()}, variables=vs.name, basis=basis, interactions=bool(interactions),
+        max_degree=max_degree,
+    )
+    if rank_deficient == "error" and concrete:
+        status = np.asarray(model.status)
+        if np.any(status != FitStatus.OK):
+            bad = np.argwhere(status != FitStatus.OK)
+            first = tuple(int(i) for i in bad[0])
+            code = FitStatus(int(status[first] if status.ndim else status))
+            raise FitError(
+                f"fit_polynomial: {len(bad)} of {status.size} fits are {code.name.lower().replace('_', ' ')} "
+                f"(first at batch index {first}; rank {np.asarray(model.rank).ravel()[0]} of "
+                f"{np.asarray(model.n_params).ravel()[0]} parameters, {np.asarray(model.n_used).ravel()[0]} samples used)"
+            )
+    return model
+
+
+def n_parameters(variables: str, degree: int, interactions: bool = False) -> int:
+    """``k p + 1`` for a variable set (equation (3)); ``C(k + p, p)`` with interactions (equation (2))."""
+    return n_terms(get_variables(variables).k, degree, interactions)

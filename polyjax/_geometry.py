@@ -1,0 +1,82 @@
+"""Directions in the local shading frame.
+
+Convention used throughout polyjax: unit vectors ``(..., 3)`` in the local frame with the
+surface normal ``n = +z`` and ``x``, ``y`` the principal directions of anisotropy. ``u`` is the
+light (incoming) direction and ``v`` the view (outgoing) direction, both pointing away from
+the surface. Spherical angles: ``theta`` from the normal, ``phi`` azimuth from ``+x``.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+_EPS = 1e-12
+
+
+def spherical_to_cartesian(theta: ArrayLike, phi: ArrayLike) -> Float[Array, "... 3"]:
+    """Unit vector ``(sin t cos p, sin t sin p, cos t)`` from polar angle ``theta`` and azimuth ``phi`` (radians)."""
+    theta = jnp.asarray(theta)
+    phi = jnp.asarray(phi)
+    st = jnp.sin(theta)
+    return jnp.stack([st * jnp.cos(phi), st * jnp.sin(phi), jnp.cos(theta)], axis=-1)
+
+
+def cartesian_to_spherical(w: ArrayLike) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
+    """Inverse of :func:`spherical_to_cartesian` for unit vectors: returns ``(theta, phi)``, phi in (-pi, pi]."""
+    w = jnp.asarray(w)
+    theta = jnp.arccos(jnp.clip(w[..., 2], -1.0, 1.0))
+    phi = jnp.arctan2(w[..., 1], w[..., 0])
+    return theta, phi
+
+
+def safe_normalize(w: ArrayLike) -> tuple[Float[Array, "... 3"], Bool[Array, "..."]]:
+    """Normalise vectors; zero (or non-finite) vectors become ``+z`` and are reported invalid.
+
+    Returns:
+        ``(unit, valid)``: unit vectors and a mask that is False where the input had no direction.
+    """
+    w = jnp.asarray(w)
+    sq = jnp.sum(w * w, axis=-1, keepdims=True)
+    valid = (sq[..., 0] > _EPS**2) & jnp.all(jnp.isfinite(w), axis=-1)
+    safe_sq = jnp.where(valid[..., None], sq, 1.0)
+    z = jnp.zeros_like(w).at[..., 2].set(1.0)
+    unit = jnp.where(valid[..., None], jnp.where(valid[..., None], w, z) / jnp.sqrt(safe_sq), z)
+    return unit, valid
+
+
+def half_vector(u: ArrayLike, v: ArrayLike) -> Float[Array, "... 3"]:
+    """Half vector ``h = (u + v) / |u + v|``.
+
+    Where ``u = -v`` the sum vanishes and ``h`` is undefined; the normal ``+z`` is returned
+    there, so downstream quantities stay finite.
+    """
+    h, _ = safe_normalize(jnp.asarray(u) + jnp.asarray(v))
+    return h
+
+
+def cos_theta(w: ArrayLike) -> Float[Array, "..."]:
+    """``n . w`` with ``n = +z``."""
+    return jnp.asarray(w)[..., 2]
+
+
+def reflect(w: ArrayLike) -> Float[Array, "... 3"]:
+    """Mirror direction about the normal: ``(-x, -y, z)``."""
+    w = jnp.asarray(w)
+    return w * jnp.array([-1.0, -1.0, 1.0], dtype=w.dtype)
+
+
+def cutoff_mask(u: ArrayLike, v: ArrayLike, cutoff_deg: float | None = 80.0) -> Bool[Array, "..."]:
+    """Samples kept by the Ngan et al. rule: both ``theta_u`` and ``theta_v`` at most ``cutoff_deg``.
+
+    Directions below the horizon (``cos theta <= 0``) are always dropped. ``cutoff_deg=None``
+    keeps every sample above the horizon.
+    """
+    cu = cos_theta(u)
+    cv = cos_theta(v)
+    keep = (cu > 0) & (cv > 0)
+    if cutoff_deg is not None:
+        c = jnp.cos(jnp.deg2rad(jnp.asarray(cutoff_deg, dtype=jnp.result_type(cu))))
+        # a tiny tolerance so that samples measured exactly at the cutoff angle are kept
+        keep = keep & (cu >= c - 1e-9) & (cv >= c - 1e-9)
+    return keep

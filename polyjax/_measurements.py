@@ -1,0 +1,126 @@
+"""The measurements pytree that every loader returns and every fitter takes."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from ._errors import InputError
+
+
+class Measurements(eqx.Module):
+    """Measured BRDF samples sharing one set of directions.
+
+    Attributes:
+        u: light (incoming) directions, unit vectors ``(n, 3)`` in the local frame (normal ``+z``).
+        v: view (outgoing) directions ``(n, 3)``.
+        values: BRDF values in 1/sr, shape ``(*batch, n)``: samples last, leading axes are
+            materials and/or colour channels (see ``axes``).
+        weights: solid-angle weights ``w_i`` of equation (11), shape ``(n,)`` or ``(*batch, n)``
+            (1 where the data gives none).
+        mask: ``(*batch, n)`` True where a measurement is valid (e.g. MERL's negative entries are False).
+        names: labels along the first batch axis (materials or samples), if any.
+        ids: sample numbers along the first batch axis (CUReT), if any.
+        channels: channel labels, e.g. ``("avg",)`` or ``("R", "G", "B")``.
+        axes: names of the batch axes, e.g. ``("material",)`` or ``("material", "channel")``.
+        source: a one-line description of where the data came from.
+    """
+
+    u: Float[Array, "n 3"]
+    v: Float[Array, "n 3"]
+    values: Float[Array, "*batch n"]
+    weights: Float[Array, "*wbatch n"]
+    mask: Bool[Array, "*batch n"]
+    names: tuple[str, ...] = eqx.field(static=True, default=())
+    ids: tuple[int, ...] = eqx.field(static=True, default=())
+    channels: tuple[str, ...] = eqx.field(static=True, default=())
+    axes: tuple[str, ...] = eqx.field(static=True, default=())
+    source: str = eqx.field(static=True, default="")
+
+    @property
+    def n_samples(self) -> int:
+        """Number of (u, v) sample pairs."""
+        return int(self.u.shape[0])
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return tuple(self.values.shape[:-1])
+
+    def __getitem__(self, index) -> "Measurements":
+        """Select along the first batch axis (e.g. one material), keeping directions."""
+        if not self.batch_shape:
+            raise InputError("Measurements has no batch axis to index")
+        idx = np.arange(self.batch_shape[0])[index]
+        scalar = np.ndim(idx) == 0
+        w = self.weights
+        if w.ndim == self.values.ndim:
+            w = w[idx]
+        names = self.names
+        ids = self.ids
+        if names:
+            names = (names[int(idx)],) if scalar else tuple(names[int(i)] for i in idx)
+        if ids:
+            ids = (ids[int(idx)],) if scalar else tuple(ids[int(i)] for i in idx)
+        axes = self.axes[1:] if scalar else self.axes
+        return Measurements(
+            u=self.u, v=self.v, values=self.values[idx], weights=w, mask=self.mask[idx],
+            names=names, ids=ids, channels=self.channels, axes=axes, source=self.source,
+        )
+
+    def select(self, names: Sequence[str]) -> "Measurements":
+        """Select materials along the first batch axis by name."""
+        index = []
+        for n in names:
+            if n not in self.names:
+                raise InputError(f"no material {n!r} in these measurements; have {list(self.names)}")
+            index.append(self.names.index(n))
+        return self[np.asarray(index)]
+
+    def valid_fraction(self) -> float:
+        return float(jnp.mean(self.mask))
+
+
+def make_measurements(
+    u, v, values, *, weights=None, mask=None, names=(), ids=(), channels=(), axes=(), source="",
+    dtype=None,
+) -> Measurements:
+    """Build a :class:`Measurements` after checking shapes; non-finite values are masked out.
+
+    Args:
+        u, v: ``(n, 3)`` directions (renormalised here).
+        values: ``(*batch, n)``.
+        weights: ``(n,)`` or ``(*batch, n)``; defaults to ones.
+        mask: ``(*batch, n)`` bool; defaults to ``isfinite(values)``.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    for name, w in (("u", u), ("v", v)):
+        if w.ndim != 2 or w.shape[1] != 3:
+            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
+    if u.shape != v.shape:
+        raise InputError(f"u and v: expected the same shape, found {u.shape} and {v.shape}")
+    n = u.shape[0]
+    if values.ndim < 1 or values.shape[-1] != n:
+        raise InputError(f"values: expected shape (..., {n}) matching u, found {values.shape}")
+    finite = np.isfinite(values)
+    m = finite if mask is None else (np.asarray(mask, dtype=bool) & finite)
+    m = np.broadcast_to(m, values.shape).copy()
+    if weights is None:
+        weights = np.ones(n)
+    weights = np.asarray(weights, dtype=np.float64)
+    if weights.shape[-1] != n:
+        raise InputError(f"weights: expected shape (..., {n}), found {weights.shape}")
+    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    v = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    values = np.where(finite, values, 0.0)
+    cast = (lambda a: jnp.asarray(a, dtype=dtype)) if dtype is not None else jnp.asarray
+    return Measurements(
+        u=cast(u), v=cast(v), values=cast(values), weights=cast(weights), mask=jnp.asarray(m),
+        names=tuple(names), ids=tuple(int(i) for i in ids), channels=tuple(channels),
+        axes=tuple(axes), source=source,
+    )

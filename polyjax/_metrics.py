@@ -1,0 +1,92 @@
+"""The error metric every model in polyjax is scored with: equation (11) of the paper."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from ._geometry import cos_theta, cutoff_mask
+
+
+def fit_weights(
+    u: ArrayLike,
+    v: ArrayLike,
+    weights: ArrayLike | None = None,
+    mask: ArrayLike | None = None,
+    cutoff_deg: float | None = 80.0,
+) -> tuple[Float[Array, "*batch n"], Float[Array, "*batch n"]]:
+    """Per-sample weights of the Ngan et al. objective (paper, equation (11)).
+
+    Returns:
+        ``(w, wc2)``: ``w_i`` (the solid-angle weight, zero for dropped samples) and
+        ``w_i cos^2(theta_u,i)``, the weight on the squared residual. Samples with
+        ``theta_u`` or ``theta_v`` above ``cutoff_deg``, below the horizon or masked out get 0.
+    """
+    u = jnp.asarray(u)
+    v = jnp.asarray(v)
+    keep = cutoff_mask(u, v, cutoff_deg)
+    w = jnp.ones(keep.shape, dtype=u.dtype) if weights is None else jnp.asarray(weights, dtype=u.dtype)
+    w = jnp.where(keep, w, 0.0)
+    if mask is not None:
+        w = jnp.where(jnp.asarray(mask), w, 0.0)
+    cu = jnp.where(keep, cos_theta(u), 0.0)
+    return w, w * cu * cu
+
+
+def l2_error(
+    values: ArrayLike,
+    predicted: ArrayLike,
+    u: ArrayLike,
+    v: ArrayLike,
+    weights: ArrayLike | None = None,
+    cutoff_deg: float | None = 80.0,
+    mask: ArrayLike | None = None,
+) -> Float[Array, "*batch"]:
+    r"""The L2 error of equation (11) (Ngan, Durand, Matusik 2005):
+
+    .. math::
+        \varphi = \Big[\frac{\sum_i w_i\,[\cos\theta_{u,i}\,(b_i - f_i)]^2}{\sum_i w_i}\Big]^{1/2}
+
+    over the samples with both ``theta_u`` and ``theta_v`` at most ``cutoff_deg``.
+
+    Args:
+        values: measured ``b``, shape ``(*batch, n)``.
+        predicted: model values ``f``, broadcastable to ``values``.
+        u, v: ``(n, 3)`` light and view directions.
+        weights: solid-angle weights ``w_i``, ``(n,)`` or ``(*batch, n)``; ones when None.
+        cutoff_deg: the grazing cutoff (80 degrees in the paper); None keeps all samples above the horizon.
+        mask: optional ``(*batch, n)`` validity mask (invalid samples are ignored).
+
+    Returns:
+        ``phi`` per batch element. ``inf`` where no sample is kept (never NaN); non-finite
+        values or predictions at kept samples are ignored only if masked, otherwise they give ``inf``.
+    """
+    values = jnp.asarray(values)
+    predicted = jnp.asarray(predicted)
+    w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)
+    r = jnp.where(wc2 > 0, values - predicted, 0.0)
+    num = jnp.sum(wc2 * r * r, axis=-1)
+    den = jnp.sum(jnp.broadcast_to(w, jnp.broadcast_shapes(w.shape, r.shape)), axis=-1)
+    num = jnp.where(jnp.isnan(num), jnp.inf, num)
+    return jnp.where(den > 0, jnp.sqrt(num / jnp.where(den > 0, den, 1.0)), jnp.inf)
+
+
+def psnr(image: ArrayLike, reference: ArrayLike, peak: float | None = None, mask: ArrayLike | None = None) -> Float[Array, ""]:
+    r"""Peak signal-to-noise ratio in dB, ``10 log10(peak^2 / MSE)``.
+
+    Args:
+        image, reference: arrays of the same shape (e.g. ``(H, W, 3)``).
+        peak: the signal peak; defaults to the maximum of ``reference`` (1.0 for tone-mapped images in [0, 1]).
+        mask: optional pixel mask (broadcastable to the images); only those pixels count.
+
+    Returns:
+        PSNR in dB; ``inf`` for identical images.
+    """
+    a = jnp.asarray(image)
+    b = jnp.asarray(reference)
+    m = jnp.ones(jnp.broadcast_shapes(a.shape, b.shape), bool) if mask is None else jnp.broadcast_to(jnp.asarray(mask), jnp.broadcast_shapes(a.shape, b.shape))
+    d = jnp.where(m, a - b, 0.0)
+    mse = jnp.sum(d * d) / jnp.maximum(jnp.sum(m), 1)
+    p = jnp.max(jnp.where(m, b, -jnp.inf)) if peak is None else jnp.asarray(peak, dtype=d.dtype)
+    return jnp.where(mse > 0, 10.0 * jnp.log10(p * p / jnp.where(mse > 0, mse, 1.0)), jnp.inf)

@@ -1,0 +1,165 @@
+"""The fitted polynomial BRDF: an ``equinox.Module`` that evaluates equation (3) at any directions."""
+
+from __future__ import annotations
+
+import enum
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from ._basis import design_matrix, exponents, n_terms
+from ._geometry import safe_normalize
+from ._variables import get_variables
+
+
+class FitStatus(enum.IntEnum):
+    """Result code of one fit (one lane of a batch)."""
+
+    OK = 0
+    #: the weighted design has lower numerical rank than parameters; the minimum-norm solution is returned
+    RANK_DEFICIENT = 1
+    #: no sample survived the cutoff and masks; coefficients are 0 and L2 is inf
+    NO_SAMPLES = 2
+
+
+class PolynomialBRDF(eqx.Module):
+    r"""A fitted polynomial BRDF (paper, equation (3)), possibly a batch of them.
+
+    ``f(u, v) = sum_i beta_i B_i(t(X(u, v)))`` where ``X`` are the explanatory variables,
+    ``Z = (X - mean) @ rotation`` their principal components, ``t = (Z - centre) / halfwidth``
+    and ``B_i`` the basis functions of :func:`polyjax.design_matrix` (Legendre by default, or the
+    paper's monomials ``Z_j^d``). Every array field has the same leading batch shape
+    (materials, channels, degrees ...); call the model to evaluate all of them at once.
+
+    Attributes:
+        coefficients: ``(*batch, m)`` basis coefficients, ``m = k * max_degree + 1`` (0 beyond a lane's degree).
+        degree: ``(*batch,)`` the degree ``p`` of each lane.
+        mean, rotation: PCA transform, ``(*batch, k)`` and ``(*batch, k, k)``.
+        centre, halfwidth: affine map of each component onto ``[-1, 1]`` (0 and 1 for monomials).
+        l2: ``(*batch,)`` L2 error (equation (11)) on the fitted data.
+        rank, condition: numerical rank and condition number of the weighted design.
+        n_used: samples that entered the fit.
+        status: :class:`FitStatus` codes.
+        variables, basis, interactions, max_degree: static description of the model family.
+    """
+
+    coefficients: Float[Array, "*batch m"]
+    degree: Int[Array, "*batch"]
+    mean: Float[Array, "*batch k"]
+    rotation: Float[Array, "*batch k k"]
+    centre: Float[Array, "*batch k"]
+    halfwidth: Float[Array, "*batch k"]
+    l2: Float[Array, "*batch"]
+    rank: Int[Array, "*batch"]
+    condition: Float[Array, "*batch"]
+    n_used: Int[Array, "*batch"]
+    status: Int[Array, "*batch"]
+    variables: str = eqx.field(static=True)
+    basis: str = eqx.field(static=True)
+    interactions: bool = eqx.field(static=True)
+    max_degree: int = eqx.field(static=True)
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return tuple(self.degree.shape)
+
+    @property
+    def k(self) -> int:
+        return int(self.mean.shape[-1])
+
+    @property
+    def n_params(self) -> Int[Array, "*batch"]:
+        """Number of parameters of each lane: ``k p + 1`` (or ``C(k+p, p)`` with interactions)."""
+        table = np.array([n_terms(self.k, p, self.interactions) for p in range(self.max_degree + 1)])
+        return jnp.asarray(table)[self.degree]
+
+    @property
+    def ok(self) -> Array:
+        """True for lanes whose fit has full rank and samples."""
+        return self.status == FitStatus.OK
+
+    def __getitem__(self, index) -> "PolynomialBRDF":
+        """Select lanes of the batch (``model[3]``, ``model[:, 0]``)."""
+        if not self.batch_shape:
+            raise IndexError("this PolynomialBRDF has no batch axes")
+        return jax.tree.map(lambda a: a[index], self)
+
+    def _lane(self, params, x: Float[Array, "... k"]) -> Float[Array, "..."]:
+        coef, mean, rot, centre, hw = params
+        t = ((x - mean) @ rot - centre) / hw
+        return design_matrix(t, self.max_degree, self.basis, self.interactions) @ coef
+
+    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "*batch ..."]:
+        """Evaluate at light directions ``u`` and view directions ``v``.
+
+        Args:
+            u, v: ``(..., 3)`` directions (broadcast together; renormalised).
+
+        Returns:
+            ``(*batch, ...)`` BRDF values; 0 where ``u`` or ``v`` is below the horizon or has no
+            direction. The polynomial itself is not clamped and can be negative.
+        """
+        dtype = self.coefficients.dtype
+        u, ok_u = safe_normalize(jnp.asarray(u, dtype))
+        v, ok_v = safe_normalize(jnp.asarray(v, dtype))
+        u, v = jnp.broadcast_arrays(u, v)
+        above = ok_u & ok_v & (u[..., 2] > 0) & (v[..., 2] > 0)
+        x = get_variables(self.variables).fn(u, v)
+        nb = len(self.batch_shape)
+        params = (self.coefficients, self.mean, self.rotation, self.centre, self.halfwidth)
+        if nb == 0:
+            out = self._lane(params, x)
+        else:
+            flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
+            out = jax.vmap(lambda p: self._lane(p, x))(flat)
+            out = out.reshape(self.batch_shape + out.shape[1:])
+        return jnp.where(above, out, 0.0)
+
+    def paper_coefficients(self) -> np.ndarray:
+        r"""The coefficients ``beta`` of equation (3) in the paper's monomials of the raw components.
+
+        Converts this model's basis (e.g. scaled Legendre) to ``f = beta_0 + sum_{d,j} beta_{(d-1)k+j} Z_j^d``.
+        Only for models without interaction terms.
+
+        Returns:
+            ``(*batch, k * max_degree + 1)`` numpy array in the order of equation (13).
+        """
+        if self.interactions:
+            raise ValueError("paper_coefficients: only defined for the model of equation (3) (interactions=False)")
+        from numpy.polynomial import legendre, polynomial
+
+        k, p = self.k, self.max_degree
+        coef = np.asarray(self.coefficients, dtype=np.float64).reshape(-1, k * p + 1)
+        centre = np.asarray(self.centre, dtype=np.float64).reshape(-1, k)
+        hw = np.asarray(self.halfwidth, dtype=np.float64).reshape(-1, k)
+        out = np.zeros_like(coef)
+        for b in range(coef.shape[0]):
+            beta0 = coef[b, 0]
+            for j in range(k):
+                series = np.zeros(p + 1)
+                series[1:] = coef[b, 1 + j :: k][:p]
+                power_t = legendre.leg2poly(series) if self.basis == "legendre" else series
+                power_t = np.pad(power_t, (0, p + 1 - len(power_t)))
+                # substitute t = (Z - c) / h  -> power series in Z
+                affine = np.array([-centre[b, j] / hw[b, j], 1.0 / hw[b, j]])
+                in_z = np.zeros(p + 1)
+                acc = np.array([1.0])
+                for d in range(p + 1):
+                    in_z[: len(acc)] += power_t[d] * acc
+                    acc = polynomial.polymul(acc, affine)
+                beta0 += in_z[0]
+                out[b, 1 + j :: k] = in_z[1:]
+            out[b, 0] = beta0
+        return out.reshape(self.coefficients.shape)
+
+
+def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:
+    """Equation (3) evaluated literally: ``beta_0 + sum_{d, j} beta_{(d-1)k+j} Z_j^d`` for components ``z (..., k)``."""
+    z = jnp.asarray(z)
+    return design_matrix(z, degree, "monomial", False) @ jnp.asarray(beta)
+
+
+__all__ = ["FitStatus", "PolynomialBRDF", "evaluate_paper_form", "exponents"]

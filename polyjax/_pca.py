@@ -1,0 +1,57 @@
+"""Principal components of the explanatory variables (paper, section 3).
+
+Convention: covariance PCA, centred and unweighted, over the samples used in the fit (a 0/1
+mask). ``Z = (X - mean) @ rotation``; the columns of ``rotation`` are the eigenvectors of the
+covariance sorted by decreasing variance, each signed so that its entry of largest magnitude
+is positive (so runs and machines agree).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+
+class PCA(eqx.Module):
+    """A fitted principal-component transform.
+
+    Attributes:
+        mean: ``(k,)`` sample mean of X.
+        rotation: ``(k, k)`` eigenvectors as columns.
+        variance: ``(k,)`` variances of the components (eigenvalues), decreasing.
+    """
+
+    mean: Float[Array, "*batch k"]
+    rotation: Float[Array, "*batch k k"]
+    variance: Float[Array, "*batch k"]
+
+    def __call__(self, x: Float[Array, "... k"]) -> Float[Array, "... k"]:
+        """Principal components ``Z = (X - mean) @ rotation``."""
+        return (x - self.mean) @ self.rotation
+
+
+def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> PCA:
+    """Fit the PCA of the rows of ``x`` where ``keep > 0``.
+
+    Args:
+        x: ``(n, k)`` explanatory variables.
+        keep: ``(n,)`` 0/1 (or boolean) mask of the samples used; all when None.
+
+    Returns:
+        :class:`PCA`. With no kept sample the mean is 0 and the rotation the identity.
+    """
+    n, k = x.shape
+    m = jnp.ones((n,), x.dtype) if keep is None else (jnp.asarray(keep) > 0).astype(x.dtype)
+    cnt = jnp.sum(m)
+    mean = jnp.sum(m[:, None] * x, axis=0) / jnp.maximum(cnt, 1.0)
+    xc = (x - mean) * m[:, None]
+    cov = (xc.T @ xc) / jnp.maximum(cnt - 1.0, 1.0)
+    evals, evecs = jnp.linalg.eigh(cov)
+    evals = evals[::-1]
+    evecs = evecs[:, ::-1]
+    idx = jnp.argmax(jnp.abs(evecs), axis=0)
+    sign = jnp.sign(evecs[idx, jnp.arange(k)])
+    sign = jnp.where(sign == 0, 1.0, sign)
+    evecs = evecs * sign[None, :]
+    return PCA(mean=mean, rotation=evecs, variance=jnp.maximum(evals, 0.0))

@@ -1,0 +1,147 @@
+"""Explanatory variables X(u, v) of the polynomial model (paper, section 3).
+
+Each set maps a light direction ``u`` and a view direction ``v`` (unit vectors in the local frame,
+normal ``n = +z``) to ``k`` scalar variables:
+
+==========================  =========================================  ====  ==========
+name                        variables                                  k     reciprocal
+==========================  =========================================  ====  ==========
+``ward``                    n.h, (n.u)(n.v)                  (sec 3.1)  2     yes
+``ashikhmin-shirley``       n.h, v.h, max(n.u, n.v)         (eq. 9)    3     yes
+``lafortune``               ux vx + uy vy, uz vz             (sec 3.3)  2     yes
+``lafortune-anisotropic``   ux vx, uy vy, uz vz              (eq. 10)   3     yes
+==========================  =========================================  ====  ==========
+
+``h = (u + v)/|u + v|`` is the half vector; ``v.h = u.h``, so every built-in set is symmetric
+in ``u`` and ``v`` and the fitted model is reciprocal. Users can add their own set with
+:func:`register_variables`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._errors import InputError, UnknownNameError
+from ._geometry import half_vector
+
+VariableFn = Callable[[Float[Array, "... 3"], Float[Array, "... 3"]], Float[Array, "... k"]]
+
+
+@dataclasses.dataclass(frozen=True)
+class VariableSet:
+    """A named set of explanatory variables.
+
+    Attributes:
+        name: registry key.
+        fn: ``fn(u, v) -> (..., k)``, a pure JAX function.
+        k: number of variables.
+        symmetric: True when ``fn(u, v) == fn(v, u)`` (the fitted model is then reciprocal).
+        description: one line naming the variables.
+    """
+
+    name: str
+    fn: VariableFn
+    k: int
+    symmetric: bool
+    description: str = ""
+
+    def __call__(self, u, v):
+        return self.fn(u, v)
+
+
+def _ward(u, v):
+    h = half_vector(u, v)
+    return jnp.stack([h[..., 2], u[..., 2] * v[..., 2]], axis=-1)
+
+
+def _ashikhmin_shirley(u, v):
+    h = half_vector(u, v)
+    vh = jnp.sum(v * h, axis=-1)
+    return jnp.stack([h[..., 2], vh, jnp.maximum(u[..., 2], v[..., 2])], axis=-1)
+
+
+def _lafortune(u, v):
+    return jnp.stack([u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1], u[..., 2] * v[..., 2]], axis=-1)
+
+
+def _lafortune_anisotropic(u, v):
+    return u * v
+
+
+_REGISTRY: dict[str, VariableSet] = {}
+_ALIASES = {"as": "ashikhmin-shirley", "ashikhmin": "ashikhmin-shirley", "laf": "lafortune"}
+
+
+def register_variables(
+    name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False
+) -> VariableSet:
+    """Register a set of explanatory variables under ``name``.
+
+    Args:
+        name: the key used in ``fit_polynomial(..., variables=name)`` and stored with saved models.
+        fn: ``fn(u, v) -> (..., k)``, traceable by JAX, finite for every unit ``u``, ``v`` above the horizon.
+        k: number of variables it returns.
+        symmetric: declare ``fn(u, v) == fn(v, u)``; checked on random directions.
+        description: one line for reports.
+        overwrite: allow replacing an existing set.
+
+    Returns:
+        The registered :class:`VariableSet`.
+    """
+    key = name.strip().lower()
+    if key in _REGISTRY and not overwrite:
+        raise InputError(f"variables {name!r}: a set of that name exists (pass overwrite=True to replace it)")
+    if int(k) < 1:
+        raise InputError(f"k: expected a positive number of variables, found {k}")
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(2, 8, 3))
+    w[..., 2] = np.abs(w[..., 2]) + 0.1
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    out = jnp.asarray(fn(jnp.asarray(w[0]), jnp.asarray(w[1])))
+    if out.shape != (8, int(k)):
+        raise InputError(f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned {out.shape}")
+    if symmetric:
+        swapped = jnp.asarray(fn(jnp.asarray(w[1]), jnp.asarray(w[0])))
+        if not bool(jnp.allclose(out, swapped, rtol=1e-5, atol=1e-6)):
+            raise InputError(f"variables {name!r}: declared symmetric but fn(u, v) != fn(v, u)")
+    vs = VariableSet(key, fn, int(k), bool(symmetric), description)
+    _REGISTRY[key] = vs
+    return vs
+
+
+def get_variables(name: str | VariableSet) -> VariableSet:
+    """Look up a variable set by name (aliases: ``"as"``, ``"laf"``)."""
+    if isinstance(name, VariableSet):
+        return name
+    key = str(name).strip().lower()
+    key = _ALIASES.get(key, key)
+    try:
+        return _REGISTRY[key]
+    except KeyError:
+        raise UnknownNameError(f"variables {name!r}: expected one of {sorted(_REGISTRY)}") from None
+
+
+def variable_sets() -> tuple[str, ...]:
+    """Names of every registered variable set."""
+    return tuple(sorted(_REGISTRY))
+
+
+def explanatory_variables(name: str, u, v) -> Float[Array, "... k"]:
+    """Evaluate the variable set ``name`` at directions ``u``, ``v``."""
+    return get_variables(name).fn(jnp.asarray(u), jnp.asarray(v))
+
+
+register_variables("ward", _ward, 2, symmetric=True, description="n.h, (n.u)(n.v)  [paper sec. 3.1]")
+register_variables(
+    "ashikhmin-shirley", _ashikhmin_shirley, 3, symmetric=True, description="n.h, v.h, max(n.u, n.v)  [paper eq. (9)]"
+)
+register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]")
+register_variables(
+    "lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True, description="ux vx, uy vy, uz vz  [paper eq. (10)]"
+)
