@@ -1,0 +1,399 @@
+r"""MERL BRDF database: the ``.binary`` layout, the Rusinkiewicz grid and its solid-angle weights.
+
+Layout of a MERL ``.binary`` file (Matusik, Pfister, Brand, McMillan 2003, ``readBRDF.cpp``):
+
+- header: 3 x int32 little-endian ``(n_theta_h, n_theta_d, n_phi_d)`` = ``(90, 90, 180)``;
+- then ``3 * n_theta_h * n_theta_d * n_phi_d`` float64 little-endian, channel-major (all R, all G, all B);
+  within a channel ``idx = k + n_phi_d * (j + n_theta_d * i)`` for the bin ``(i, j, k)`` of
+  ``(theta_h, theta_d, phi_d)``;
+- scale to BRDF in 1/sr: R x 1/1500, G x 1.15/1500, B x 1.66/1500;
+- negative entries mark missing measurements: they are masked out, never fitted.
+
+Index mapping (with ``N_h, N_d, N_p`` the header dimensions)::
+
+    i = floor(sqrt(theta_h / (pi/2)) * N_h),   j = floor(theta_d / (pi/2) * N_d),
+    k = floor(phi_d / pi * N_p)  after phi_d -> phi_d + pi for phi_d < 0 (reciprocity),
+
+clamped to the valid range, and bin centres (the directions a bin's value is attached to)
+``theta_h = (i/N_h)^2 pi/2``, ``theta_d = j/N_d pi/2``, ``phi_d = k/N_p pi``. A value within
+``1e-9`` (in index units) below a bin edge is taken to be on the edge, so the mapping inverts the bin
+centres exactly despite round-off.
+
+Directions of a bin, with ``phi_h = 0`` (isotropy): the difference vector
+``d = (sin td cos pd, sin td sin pd, cos td)`` is rotated back by ``theta_h`` about ``y``:
+``u = R_y(theta_h) d`` (light) and ``v = R_y(theta_h) (-d_x, -d_y, d_z)`` (view), so that
+``cos theta_u = cos td cos th - sin td cos pd sin th`` and
+``cos theta_v = cos td cos th + sin td cos pd sin th``, and ``(u + v) / |u + v| = (sin th, 0, cos th)``.
+
+Solid-angle weight of a bin (its measure in the space of direction pairs ``(omega_u, omega_v)``).
+Rusinkiewicz's change of variables has the Jacobian ``d omega_u d omega_v = 4 cos theta_d d omega_h
+d omega_d`` (check: over ``omega_h`` in the sphere and ``theta_d <= pi/2`` it gives
+``4 pi * 4 pi = 16 pi^2``). With ``d omega = sin theta d theta d phi``, integrating ``phi_h`` over
+``2 pi`` (isotropy) and counting both halves ``phi_d`` and ``phi_d + pi`` of a bin (reciprocity)::
+
+    w_ijk = 2 pi * 2 * 4 * [cos a_i - cos a_{i+1}] * [(sin^2 b_{j+1} - sin^2 b_j) / 2] * pi / N_p,
+
+the exact integral of ``sin theta_h`` and ``cos theta_d sin theta_d`` over the quadrature cell of the
+bin centre: in index units the centre ``i`` owns ``[i - 1/2, i + 1/2]`` (clipped to ``[0, N]``, the last
+cell reaching ``N``), i.e. ``a_i = (max(i - 1/2, 0)/N_h)^2 pi/2`` and ``b_j = max(j - 1/2, 0)/N_d pi/2``.
+(MERL's stored value averages the index cell ``[i, i + 1)``, but it is attached to the direction of
+``i``; cells centred on the sample make the weights the quadrature weights of those directions.
+Edge-anchored cells over-weight the horizon: their sums below come out 3-5 % high.) The weights of all
+bins sum to ``8 pi^2`` (the pairs whose half vector is above the surface); over the bins with both
+directions above the horizon they sum to ``(2 pi)^2`` and ``sum w cos theta_u cos theta_v`` to ``pi^2``
+to within 0.1 % at MERL's resolution (the horizon cuts cells; checked in the tests).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .._errors import InputError
+from .._measurements import Measurements, make_measurements
+from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
+
+#: The resolution of the MERL database ``(n_theta_h, n_theta_d, n_phi_d)``.
+MERL_RESOLUTION: tuple[int, int, int] = (90, 90, 180)
+#: Number of bins per channel (1,458,000).
+MERL_N_BINS = 90 * 90 * 180
+#: Multipliers from stored numbers to BRDF in 1/sr, per channel (R, G, B).
+MERL_SCALE: tuple[float, float, float] = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+_HEADER_BYTES = 12
+_MAX_BINS = 10**8  # a header announcing more bins than this is not a MERL header
+_INDEX_TOL = 1e-9
+
+#: All 100 MERL material names, as MERL spells them.
+MERL_NAMES: tuple[str, ...] = (
+    'alum-bronze', 'alumina-oxide', 'aluminium', 'aventurnine', 'beige-fabric', 'black-fabric', 'black-obsidian',
+    'black-oxidized-steel', 'black-phenolic', 'black-soft-plastic', 'blue-acrylic', 'blue-fabric',
+    'blue-metallic-paint', 'blue-metallic-paint2', 'blue-rubber', 'brass', 'cherry-235', 'chrome', 'chrome-steel',
+    'colonial-maple-223', 'color-changing-paint1', 'color-changing-paint2', 'color-changing-paint3',
+    'dark-blue-paint', 'dark-red-paint', 'dark-specular-fabric', 'delrin', 'fruitwood-241', 'gold-metallic-paint',
+    'gold-metallic-paint2', 'gold-metallic-paint3', 'gold-paint', 'gray-plastic', 'grease-covered-steel',
+    'green-acrylic', 'green-fabric', 'green-latex', 'green-metallic-paint', 'green-metallic-paint2',
+    'green-plastic', 'hematite', 'ipswich-pine-221', 'light-brown-fabric', 'light-red-paint', 'maroon-plastic',
+    'natural-209', 'neoprene-rubber', 'nickel', 'nylon', 'orange-paint', 'pearl-paint', 'pickled-oak-260',
+    'pink-fabric', 'pink-fabric2', 'pink-felt', 'pink-jasper', 'pink-plastic', 'polyethylene', 'polyurethane-foam',
+    'pure-rubber', 'purple-paint', 'pvc', 'red-fabric', 'red-fabric2', 'red-metallic-paint', 'red-phenolic',
+    'red-plastic', 'red-specular-plastic', 'silicon-nitrade', 'silver-metallic-paint', 'silver-metallic-paint2',
+    'silver-paint', 'special-walnut-224', 'specular-black-phenolic', 'specular-blue-phenolic',
+    'specular-green-phenolic', 'specular-maroon-phenolic', 'specular-orange-phenolic', 'specular-red-phenolic',
+    'specular-violet-phenolic', 'specular-white-phenolic', 'specular-yellow-phenolic', 'ss440', 'steel', 'teflon',
+    'tungsten-carbide', 'two-layer-gold', 'two-layer-silver', 'violet-acrylic', 'violet-rubber', 'white-acrylic',
+    'white-diffuse-bball', 'white-fabric', 'white-fabric2', 'white-marble', 'white-paint', 'yellow-matte-plastic',
+    'yellow-paint', 'yellow-phenolic', 'yellow-plastic',
+)
+#: The six MERL materials of the paper's Table 3.
+TABLE3_MATERIALS: tuple[str, ...] = (
+    "beige-fabric", "blue-metallic-paint", "dark-blue-paint", "green-latex", "orange-paint", "yellow-plastic",
+)
+
+
+def _check_resolution(resolution) -> tuple[int, int, int]:
+    res = tuple(int(r) for r in resolution)
+    if len(res) != 3 or any(r <= 0 for r in res):
+        raise InputError(f"resolution: expected three positive bin counts (n_theta_h, n_theta_d, n_phi_d), found {resolution!r}")
+    return res
+
+
+def merl_index(theta_h, theta_d, phi_d, resolution: Sequence[int] = MERL_RESOLUTION) -> np.ndarray:
+    """Flat bin index ``k + N_p (j + N_d i)`` of Rusinkiewicz angles (radians), MERL's convention.
+
+    Args:
+        theta_h, theta_d, phi_d: arrays of the same shape; ``phi_d`` may be in ``(-pi, pi]``.
+        resolution: ``(N_h, N_d, N_p)``.
+
+    Returns:
+        int64 array of flat indices into one channel.
+    """
+    nh, nd, npd = _check_resolution(resolution)
+    th = np.asarray(theta_h, dtype=np.float64)
+    td = np.asarray(theta_d, dtype=np.float64)
+    pd = np.asarray(phi_d, dtype=np.float64)
+    pd = np.where(pd < 0.0, pd + np.pi, pd)
+    xi = np.sqrt(np.clip(th, 0.0, None) / (np.pi / 2)) * nh
+    i = np.clip(np.floor(xi + _INDEX_TOL), 0, nh - 1).astype(np.int64)
+    j = np.clip(np.floor(td / (np.pi / 2) * nd + _INDEX_TOL), 0, nd - 1).astype(np.int64)
+    k = np.clip(np.floor(pd / np.pi * npd + _INDEX_TOL), 0, npd - 1).astype(np.int64)
+    return k + npd * (j + nd * i)
+
+
+def merl_bin_angles(resolution: Sequence[int] = MERL_RESOLUTION) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bin-centre angles ``(theta_h, theta_d, phi_d)`` of every bin, each ``(N_h N_d N_p,)`` in file order."""
+    nh, nd, npd = _check_resolution(resolution)
+    i, j, k = np.meshgrid(np.arange(nh), np.arange(nd), np.arange(npd), indexing="ij")
+    th = (i.ravel() / nh) ** 2 * (np.pi / 2)
+    td = j.ravel() / nd * (np.pi / 2)
+    pd = k.ravel() / npd * np.pi
+    return th, td, pd
+
+
+def rusinkiewicz_to_directions(theta_h, theta_d, phi_d) -> tuple[np.ndarray, np.ndarray]:
+    """Light ``u`` and view ``v`` unit vectors ``(..., 3)`` of Rusinkiewicz angles with ``phi_h = 0``."""
+    th = np.asarray(theta_h, dtype=np.float64)
+    td = np.asarray(theta_d, dtype=np.float64)
+    pd = np.asarray(phi_d, dtype=np.float64)
+    dx = np.sin(td) * np.cos(pd)
+    dy = np.sin(td) * np.sin(pd)
+    dz = np.cos(td)
+    c, s = np.cos(th), np.sin(th)
+    u = np.stack([dx * c + dz * s, dy, dz * c - dx * s], axis=-1)
+    v = np.stack([-dx * c + dz * s, -dy, dz * c + dx * s], axis=-1)
+    return u, v
+
+
+def directions_to_rusinkiewicz(u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rusinkiewicz angles ``(theta_h, theta_d, phi_d)`` of light/view unit vectors ``(..., 3)`` (numpy).
+
+    ``phi_d`` is returned in ``(-pi, pi]``; :func:`merl_index` folds it into ``[0, pi)``.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    h = u + v
+    hn = np.linalg.norm(h, axis=-1, keepdims=True)
+    h = np.where(hn > 1e-12, h / np.where(hn > 1e-12, hn, 1.0), np.array([0.0, 0.0, 1.0]))
+    th = np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2])
+    ph = np.arctan2(h[..., 1], h[..., 0])
+    cp, sp = np.cos(ph), np.sin(ph)
+    x = cp * u[..., 0] + sp * u[..., 1]
+    y = -sp * u[..., 0] + cp * u[..., 1]
+    z = u[..., 2]
+    ct, st = np.cos(th), np.sin(th)
+    dx = x * ct - z * st
+    dz = x * st + z * ct
+    td = np.arctan2(np.hypot(dx, y), dz)
+    pd = np.arctan2(y, dx)
+    return th, td, pd
+
+
+def _cell_edges(n: int) -> np.ndarray:
+    """Quadrature-cell edges in index units: sample ``i`` owns ``[i - 1/2, i + 1/2]``, clipped to ``[0, n]``
+    (the last cell reaches ``n``)."""
+    e = np.arange(n + 1) - 0.5
+    e[0], e[-1] = 0.0, float(n)
+    return e
+
+
+def merl_bin_weights(resolution: Sequence[int] = MERL_RESOLUTION) -> np.ndarray:
+    """Solid-angle weight of every bin in the space of direction pairs, ``(N_h N_d N_p,)`` in file order.
+
+    ``w_ijk = 16 pi [cos a_i - cos a_{i+1}] [(sin^2 b_{j+1} - sin^2 b_j)/2] pi/N_p`` with the
+    quadrature-cell edges ``a``, ``b`` of the module docstring; ``sum w = 8 pi^2``.
+    """
+    nh, nd, npd = _check_resolution(resolution)
+    a = (_cell_edges(nh) / nh) ** 2 * (np.pi / 2)
+    b = _cell_edges(nd) / nd * (np.pi / 2)
+    wh = np.cos(a[:-1]) - np.cos(a[1:])
+    wd = 0.5 * (np.sin(b[1:]) ** 2 - np.sin(b[:-1]) ** 2)
+    w = 16.0 * np.pi * wh[:, None, None] * wd[None, :, None] * np.full((1, 1, npd), np.pi / npd)
+    return w.ravel()
+
+
+@functools.lru_cache(maxsize=4)
+def merl_grid(resolution: tuple[int, int, int] = MERL_RESOLUTION):
+    """``(u, v, weights, above)`` for every bin in file order; ``above`` is True where both directions
+    are above the horizon (``cos theta_u > 0`` and ``cos theta_v > 0``). Cached; arrays are read-only."""
+    th, td, pd = merl_bin_angles(resolution)
+    u, v = rusinkiewicz_to_directions(th, td, pd)
+    w = merl_bin_weights(resolution)
+    above = (u[:, 2] > 0) & (v[:, 2] > 0)
+    for a in (u, v, w, above):
+        a.setflags(write=False)
+    return u, v, w, above
+
+
+def _looks_like_text(head: bytes) -> bool:
+    if not head:
+        return False
+    printable = sum(32 <= c < 127 or c in (9, 10, 13) for c in head)
+    return printable == len(head)
+
+
+_SIGNATURES = {b"\x89HDF": "an HDF5 file", b"PK\x03\x04": "a zip archive", b"\x89PNG": "a PNG image",
+               b"\x76\x2f\x31\x01": "an OpenEXR image"}
+
+
+def read_merl_binary(path: str | os.PathLike, *, scaled: bool = True) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Read a MERL ``.binary`` file completely and check it.
+
+    Args:
+        path: the file.
+        scaled: multiply by :data:`MERL_SCALE` (BRDF in 1/sr); False returns the stored numbers.
+
+    Returns:
+        ``(values, resolution)`` with ``values`` float64 ``(3, N_h N_d N_p)`` in file order
+        (negative entries = missing data, kept negative) and the header's resolution.
+
+    Raises:
+        EmptyFileError, TruncatedFileError, HeaderError, WrongFormatError, NonFiniteValueError.
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    expected_header = "a MERL .binary file: int32 header (90, 90, 180) then 3 x N float64"
+    if len(data) == 0:
+        raise EmptyFileError(path, expected_header, "an empty file (0 bytes)")
+    for sig, what in _SIGNATURES.items():
+        if data.startswith(sig):
+            raise WrongFormatError(path, expected_header, what)
+    if _looks_like_text(data[:256]):
+        raise WrongFormatError(path, expected_header, f"a text file (starts with {data[:40]!r})")
+    if len(data) < _HEADER_BYTES:
+        raise TruncatedFileError(path, "a 12-byte header (3 x int32)", f"only {len(data)} bytes")
+    dims = np.frombuffer(data, dtype="<i4", count=3)
+    if np.any(dims <= 0) or int(np.prod(dims.astype(np.int64))) > _MAX_BINS:
+        raise HeaderError(path, "3 positive int32 bin counts such as (90, 90, 180)", f"{tuple(int(d) for d in dims)}")
+    res = tuple(int(d) for d in dims)
+    n = int(np.prod(res))
+    want = _HEADER_BYTES + 3 * 8 * n
+    if len(data) < want:
+        raise TruncatedFileError(
+            path, f"{want} bytes for the header {res} (3 x {n} float64)", f"{len(data)} bytes ({want - len(data)} missing)"
+        )
+    if len(data) > want:
+        raise HeaderError(path, f"{want} bytes for the header {res}", f"{len(data)} bytes ({len(data) - want} extra)")
+    raw = np.frombuffer(data, dtype="<f8", offset=_HEADER_BYTES, count=3 * n).reshape(3, n)
+    finite = np.isfinite(raw)
+    if not finite.all():
+        c, idx = np.argwhere(~finite)[0]
+        raise NonFiniteValueError(
+            path, "finite numbers (negative = missing)",
+            f"{int((~finite).sum())} NaN/inf values (first: channel {'RGB'[c]}, bin {idx}: {raw[c, idx]})",
+        )
+    if scaled:
+        values = raw * np.asarray(MERL_SCALE)[:, None]
+    else:
+        values = raw.copy()
+    return values, res
+
+
+def write_merl_binary(
+    path: str | os.PathLike,
+    values,
+    *,
+    resolution: Sequence[int] | None = None,
+    mask=None,
+    scaled: bool = True,
+) -> Path:
+    """Write a MERL ``.binary`` file.
+
+    Args:
+        path: the file to write.
+        values: ``(3, N_h N_d N_p)`` or ``(3, N_h, N_d, N_p)`` BRDF values in file order (in 1/sr when
+            ``scaled``: divided by :data:`MERL_SCALE` before writing).
+        resolution: ``(N_h, N_d, N_p)``; default :data:`MERL_RESOLUTION`, or the shape of a 4-d ``values``.
+        mask: optional bool array of the same shape as ``values``; False entries (and NaN) are written as -1
+            (MERL's "missing").
+        scaled: see ``values``.
+
+    Returns:
+        The path written.
+    """
+    vals = np.array(values, dtype=np.float64)
+    if resolution is None:
+        resolution = vals.shape[1:] if vals.ndim == 4 else MERL_RESOLUTION
+    res = _check_resolution(resolution)
+    n = int(np.prod(res))
+    if vals.size != 3 * n or vals.shape[0] != 3:
+        raise InputError(f"values: expected shape (3, {n}) or (3, {res[0]}, {res[1]}, {res[2]}) for resolution {res}, found {vals.shape}")
+    vals = vals.reshape(3, n)
+    bad = ~np.isfinite(vals)
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.size != vals.size:
+            raise InputError(f"mask: expected {vals.size} entries like values, found shape {m.shape}")
+        bad |= ~m.reshape(3, n)
+    if scaled:
+        vals = vals / np.asarray(MERL_SCALE)[:, None]
+    vals = np.where(bad, -1.0, vals)
+    path = Path(path)
+    with open(path, "wb") as f:
+        f.write(np.asarray(res, dtype="<i4").tobytes())
+        f.write(vals.astype("<f8").tobytes())
+    return path
+
+
+def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarray:
+    """Indices of the kept bins: all ``valid`` ones, or a reproducible random subset (sorted)."""
+    idx = np.flatnonzero(valid)
+    if subsample is None:
+        return idx
+    if isinstance(subsample, (bool, np.bool_)) or not isinstance(subsample, (int, float, np.integer, np.floating)):
+        raise InputError(f"subsample: expected None, a count or a fraction in (0, 1), found {subsample!r}")
+    if isinstance(subsample, (float, np.floating)) and 0.0 < subsample < 1.0:
+        count = max(1, int(round(float(subsample) * idx.size)))
+    elif float(subsample) >= 1 and float(subsample).is_integer():
+        count = int(subsample)
+    else:
+        raise InputError(f"subsample: expected None, a positive count or a fraction in (0, 1), found {subsample!r}")
+    if count >= idx.size:
+        return idx
+    rng = np.random.default_rng(seed)
+    return np.sort(rng.choice(idx, size=count, replace=False))
+
+
+def _merl_measurements(values, valid, resolution, *, subsample, seed, names, source) -> Measurements:
+    """values ``(m, 3, N)`` with ``valid`` ``(m, 3, N)`` -> Measurements over the kept bins."""
+    u, v, w, above = merl_grid(tuple(resolution))
+    keep = _choose_bins(above & valid.any(axis=(0, 1)), subsample, seed, source)
+    vals = values[..., keep]
+    mask = valid[..., keep]
+    single = vals.shape[0] == 1
+    if single:
+        vals, mask = vals[0], mask[0]
+    return make_measurements(
+        u[keep], v[keep], np.where(mask, vals, 0.0), weights=w[keep], mask=mask,
+        names=() if single else names, channels=("R", "G", "B"),
+        axes=("channel",) if single else ("material", "channel"), source=source,
+    )
+
+
+def load_merl_binary(
+    paths: str | os.PathLike | Sequence[str | os.PathLike],
+    *,
+    subsample: int | float | None = None,
+    seed: int = 0,
+    names: Sequence[str] | None = None,
+) -> Measurements:
+    """Load MERL ``.binary`` files (anywhere on disk) as :class:`polyjax.Measurements`.
+
+    Every bin with both directions above the horizon and a non-negative value in some file is a sample
+    (about 1.1 million of 1,458,000 for real MERL files); directions from the Rusinkiewicz bin centres,
+    weights = the bins' solid-angle measure (module docstring). Negative entries are masked out.
+
+    Args:
+        paths: one file or a sequence of files of the same resolution.
+        subsample: None (all valid bins), a count, or a fraction in (0, 1): a random subset of the bins,
+            reproducible from ``seed``.
+        seed: seed of the subsample.
+        names: material names (default: the file names without extension).
+
+    Returns:
+        One file: ``values`` ``(3, n)`` with ``axes=("channel",)``; several: ``(m, 3, n)`` with
+        ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr.
+    """
+    single = isinstance(paths, (str, os.PathLike))
+    plist = [Path(paths)] if single else [Path(p) for p in paths]
+    if not plist:
+        raise InputError("paths: expected at least one MERL .binary file")
+    tables = []
+    res = None
+    for p in plist:
+        vals, r = read_merl_binary(p)
+        if res is not None and r != res:
+            raise HeaderError(p, f"the resolution {res} of {plist[0]}", f"{r}")
+        res = r
+        tables.append(vals)
+    values = np.stack(tables)
+    valid = values >= 0.0
+    names = tuple(names) if names is not None else tuple(p.stem for p in plist)
+    if len(names) != len(plist):
+        raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
+    return _merl_measurements(
+        values, valid, res, subsample=subsample, seed=seed, names=names,
+        source=f"MERL .binary {', '.join(p.name for p in plist)}" + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
+    )
