@@ -49,17 +49,20 @@ def load_model(path: str | os.PathLike) -> PolynomialBRDF:
         if path.suffix == ".json":
             doc = json.loads(path.read_text())
             meta = doc
-            arrays = {
-                k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"]) for k, v in doc["arrays"].items()
-            }
+            if isinstance(doc, dict) and doc.get("format") == FORMAT:
+                arrays = {
+                    k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"]) for k, v in doc["arrays"].items()
+                }
+            else:
+                arrays = {}
         else:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["__meta__"]))
                 arrays = {k: z[k] for k in z.files if k != "__meta__"}
     except (ValueError, KeyError, OSError) as e:
         raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
-    if meta.get("format") != FORMAT:
-        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format")))
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format") if isinstance(meta, dict) else meta))
     missing = [k for k in _ARRAYS if k not in arrays]
     if missing:
         raise DataFormatError(path, f"arrays {list(_ARRAYS)}", f"missing {missing}")

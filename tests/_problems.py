@@ -1,0 +1,71 @@
+"""Shared problem definitions for the core tests: datasets, reference solvers and generated data."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+import polyjax as pj
+
+#: The paper's Table 1 (Quarry Tile, Lafortune variables, p = 1..6).
+PAPER_TABLE1_QUARRY = (0.0324, 0.0205, 0.0142, 0.0116, 0.0106, 0.0093)
+VARIABLE_SETS = ("ward", "ashikhmin-shirley", "lafortune")
+SYMMETRIC_SETS = ("ward", "ashikhmin-shirley", "lafortune", "lafortune-anisotropic")
+
+
+@functools.lru_cache(maxsize=None)
+def curet(samples: tuple[int, ...]) -> pj.Measurements:
+    return pj.data.load_curet(None, list(samples))
+
+
+def random_hemisphere(n: int, seed: int = 0, min_cos: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random (u, v) pairs above the horizon."""
+    rng = np.random.default_rng(seed)
+
+    def draw():
+        ct = rng.uniform(min_cos, 1.0, n)
+        ph = rng.uniform(-np.pi, np.pi, n)
+        st = np.sqrt(1 - ct**2)
+        return np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
+
+    return draw(), draw()
+
+
+def numpy_reference_fit(u, v, b, variables: str, degree: int, cutoff_deg: float = 80.0):
+    """An independent numpy implementation of the paper's fit: PCA, monomial design (eq. 13), lstsq.
+
+    Returns ``(l2, predictions)``; ``predictions`` at all samples.
+    """
+    u = np.asarray(u)
+    v = np.asarray(v)
+    b = np.asarray(b)
+    x = np.asarray(pj.explanatory_variables(variables, u, v))
+    c = np.cos(np.deg2rad(cutoff_deg))
+    keep = (u[:, 2] >= c - 1e-9) & (v[:, 2] >= c - 1e-9)
+    xm = x[keep].mean(0)
+    evals, evecs = np.linalg.eigh(np.cov((x[keep] - xm).T))
+    z = (x - xm) @ evecs
+    design = np.concatenate([np.ones((len(z), 1))] + [z**d for d in range(1, degree + 1)], axis=1)
+    cu = u[:, 2]
+    beta = np.linalg.lstsq(design[keep] * cu[keep, None], b[keep] * cu[keep], rcond=None)[0]
+    pred = design @ beta
+    l2 = np.sqrt(np.mean((cu[keep] * (b[keep] - pred[keep])) ** 2))
+    return l2, pred
+
+
+def polynomial_data(variables: str, degree: int, n: int = 400, seed: int = 1):
+    """Data generated exactly by a polynomial of the model's own form (equation (3)).
+
+    Returns ``(u, v, values, beta)`` where ``values = beta_0 + sum beta Z^d`` on the PCA of the
+    explanatory variables over all samples (no cutoff needed: directions stay below 80 degrees).
+    """
+    u, v = random_hemisphere(n, seed, min_cos=np.cos(np.deg2rad(79.0)))
+    x = np.asarray(pj.explanatory_variables(variables, u, v))
+    pca = pj.fit_pca(x)
+    z = np.asarray(pca(x))
+    k = x.shape[1]
+    rng = np.random.default_rng(seed + 100)
+    beta = rng.normal(size=k * degree + 1)
+    values = np.asarray(pj.evaluate_paper_form(beta, z, degree))
+    return u, v, values, beta
