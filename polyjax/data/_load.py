@@ -1,4 +1,5 @@
-"""One entry point for every dataset: ``load("curet:25")``."""
+"""One entry point for every dataset: ``load("curet:25")``, ``load("merl-nbrdf:green-latex")``,
+``load("cornell:cayman")``."""
 
 from __future__ import annotations
 
@@ -6,19 +7,45 @@ import os
 
 from .._errors import UnknownNameError
 from .._measurements import Measurements
+from ._cornell import load_cornell
 from ._curet import load_curet
+from ._merl import load_merl_binary
+from ._nbrdf import load_merl_nbrdf
+
+_KINDS = "'curet:<sample>', 'merl-nbrdf:<material>', 'cornell:<material>' or 'merl:<path to .binary>'"
 
 
-def load(spec: str, root: str | os.PathLike | None = None) -> Measurements:
+def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measurements:
     """Load a dataset by name.
 
     Args:
-        spec: ``"curet:25"``, ``"curet:25,33"``, ``"curet:quarry tile"`` or ``"curet"`` (all samples).
+        spec: ``"<kind>:<what>"``, several items separated by commas:
+
+            - ``"curet:25"``, ``"curet:25,33"``, ``"curet:quarry tile"`` or ``"curet"`` (all 61 samples);
+            - ``"merl-nbrdf:green-latex"``, ``"merl-nbrdf:table3"`` (the six of Table 3), ``"merl-nbrdf:all"``:
+              the neural MERL fits on the MERL grid (options ``subsample``, ``seed``);
+            - ``"cornell:cayman"`` (also ``garnet_red``, ``acryl_blue`` or a file path; option ``channels``);
+            - ``"merl:/path/to/file.binary"``: a MERL ``.binary`` file (options ``subsample``, ``seed``).
         root: data root (default ``$POLYJAX_DATA``).
+        **options: passed to the loader (:func:`load_merl_nbrdf`, :func:`load_cornell`, :func:`load_merl_binary`).
     """
     kind, _, rest = spec.partition(":")
     kind = kind.strip().lower()
+    items = [s.strip() for s in rest.split(",") if s.strip()]
     if kind == "curet":
-        samples = [s for s in rest.split(",") if s.strip()] or None
-        return load_curet(root, samples)
-    raise UnknownNameError(f"dataset {spec!r}: expected 'curet:<sample>'")
+        if options:
+            raise UnknownNameError(f"load({spec!r}): CUReT takes no options, found {sorted(options)}")
+        return load_curet(root, items or None)
+    if kind in ("merl-nbrdf", "nbrdf", "merl_nbrdf"):
+        if not items:
+            raise UnknownNameError(f"dataset {spec!r}: expected 'merl-nbrdf:<material>[,<material>...]', 'table3' or 'all'")
+        return load_merl_nbrdf(items[0] if len(items) == 1 else items, root, **options)
+    if kind == "cornell":
+        if not items:
+            raise UnknownNameError(f"dataset {spec!r}: expected 'cornell:<material or path>'")
+        return load_cornell(items[0] if len(items) == 1 else items, root, **options)
+    if kind == "merl":
+        if not items:
+            raise UnknownNameError(f"dataset {spec!r}: expected 'merl:<path to .binary>[,<path>...]'")
+        return load_merl_binary(items[0] if len(items) == 1 else items, **options)
+    raise UnknownNameError(f"dataset {spec!r}: expected {_KINDS}")
