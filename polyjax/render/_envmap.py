@@ -1,0 +1,135 @@
+"""Environment lighting from a latitude-longitude map, with importance sampling.
+
+Convention (world ``+y`` up): pixel row ``i`` of an ``H x W`` map covers the polar angle
+``theta in [i pi / H, (i + 1) pi / H]`` measured from ``+y``; column ``j`` covers the azimuth
+``phi in [2 pi j / W - pi, 2 pi (j + 1) / W - pi]``, and direction
+``d = (sin theta sin phi, cos theta, -sin theta cos phi)`` (the map's centre column looks
+along ``-z``). Radiance is constant over a pixel.
+
+Sampling picks a pixel with probability ``p_ij`` proportional to ``luminance_ij sin theta_i`` and a
+point uniformly in ``(theta, phi)`` inside it; the solid-angle density is
+``pdf(d) = p_ij H W / (2 pi^2 sin theta)``, so the estimator ``L(d) / pdf(d)`` has no variance
+from the map's own radiance variation (only from the BRDF and cosine).
+"""
+
+from __future__ import annotations
+
+import os
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import InputError
+
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+class EnvironmentLight(eqx.Module):
+    """A distant environment map (linear RGB radiance) lighting the whole scene.
+
+    Attributes:
+        image: ``(H, W, 3)`` radiance (already multiplied by ``scale``).
+        cdf: ``(H W,)`` cumulative pixel-selection probabilities (row-major).
+        pmf: ``(H W,)`` pixel-selection probabilities ``p_ij``.
+    """
+
+    image: Float[Array, "h w 3"]
+    cdf: Float[Array, "hw"]
+    pmf: Float[Array, "hw"]
+
+    def __init__(self, image: ArrayLike, scale: float = 1.0):
+        """Args:
+        image: ``(H, W, 3)`` latitude-longitude radiance map (non-negative, finite).
+        scale: multiplies the radiance.
+        """
+        img = np.asarray(image, dtype=float)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=-1)
+        if img.ndim != 3 or img.shape[-1] != 3 or img.shape[0] < 1 or img.shape[1] < 1:
+            raise InputError(f"image: expected an (H, W, 3) latitude-longitude map, found shape {img.shape}")
+        if not np.all(np.isfinite(img)) or np.any(img < 0):
+            raise InputError("image: expected finite, non-negative radiance, found negative or non-finite pixels")
+        img = img * float(scale)
+        h, w, _ = img.shape
+        theta = (np.arange(h) + 0.5) * np.pi / h
+        weight = (img @ _LUMA) * np.sin(theta)[:, None]
+        if not weight.sum() > 0:  # a black map: sample uniformly over the sphere (all radiance is 0 anyway)
+            weight = np.broadcast_to(np.sin(theta)[:, None], (h, w))
+        pmf = (weight / weight.sum()).reshape(-1)
+        cdf = np.cumsum(pmf)
+        cdf[-1] = 1.0
+        self.image = jnp.asarray(img)
+        self.pmf = jnp.asarray(pmf)
+        self.cdf = jnp.asarray(cdf)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.image.shape[:2])
+
+    def radiance(self, d: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
+        """Radiance arriving from world directions ``d`` (unit vectors)."""
+        h, w = self.shape
+        theta = jnp.arccos(jnp.clip(d[..., 1], -1.0, 1.0))
+        phi = jnp.arctan2(d[..., 0], -d[..., 2])
+        i = jnp.clip(jnp.floor(theta / jnp.pi * h).astype(jnp.int32), 0, h - 1)
+        j = jnp.clip(jnp.floor((phi + jnp.pi) / (2 * jnp.pi) * w).astype(jnp.int32), 0, w - 1)
+        return self.image.astype(d.dtype)[i, j]
+
+    def sample(self, xi: Float[Array, "... 3"]) -> tuple[Float[Array, "... 3"], Float[Array, "... 3"]]:
+        """Importance-sample directions from three uniforms per sample.
+
+        Returns:
+            ``(d, L / pdf)``: world directions and radiance divided by the solid-angle density.
+        """
+        h, w = self.shape
+        dtype = xi.dtype
+        k = jnp.searchsorted(self.cdf.astype(dtype), xi[..., 0], side="right", method="scan_unrolled")
+        k = jnp.clip(k, 0, h * w - 1)
+        i, j = k // w, k % w
+        theta = (i.astype(dtype) + xi[..., 1]) * (jnp.pi / h)
+        phi = (j.astype(dtype) + xi[..., 2]) * (2 * jnp.pi / w) - jnp.pi
+        st = jnp.sin(theta)
+        d = jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], axis=-1)
+        p = self.pmf.astype(dtype)[k]
+        # L / pdf = L * 2 pi^2 sin(theta) / (p H W); p > 0 for every pixel that can be drawn
+        inv_pdf = jnp.where(p > 0, 2 * jnp.pi**2 * st / (jnp.where(p > 0, p, 1.0) * h * w), 0.0)
+        return d, self.image.astype(dtype)[i, j] * inv_pdf[..., None]
+
+
+def load_envmap(path: str | os.PathLike, scale: float = 1.0) -> EnvironmentLight:
+    """Read a latitude-longitude environment map from an OpenEXR file (linear RGB)."""
+    from ._image import read_exr
+
+    return EnvironmentLight(read_exr(path), scale)
+
+
+def procedural_sky(height: int = 64, width: int = 128, sun_elevation_deg: float = 40.0, sun_azimuth_deg: float = 40.0,
+                   sun_radiance: float = 400.0, sun_radius_deg: float = 3.0, sky_radiance: float = 1.0) -> EnvironmentLight:
+    """A built-in sky: a zenith-to-horizon gradient, a darker ground and a small bright sun disc.
+
+    The sky radiance goes from blue-ish ``(0.35, 0.55, 1.0)`` at the zenith to ``(1, 1, 1)`` at the
+    horizon (times ``sky_radiance``); the ground is ``(0.25, 0.2, 0.15)``; the sun is a disc of
+    radius ``sun_radius_deg`` at the given elevation and azimuth (azimuth from ``-z`` towards ``+x``).
+    """
+    theta = (np.arange(height) + 0.5) * np.pi / height
+    phi = (np.arange(width) + 0.5) * 2 * np.pi / width - np.pi
+    T, P = np.meshgrid(theta, phi, indexing="ij")
+    d = np.stack([np.sin(T) * np.sin(P), np.cos(T), -np.sin(T) * np.cos(P)], -1)
+    up = np.clip(d[..., 1], 0.0, 1.0)[..., None]
+    zenith = np.array([0.35, 0.55, 1.0])
+    sky = sky_radiance * (up * zenith + (1 - up) * np.ones(3))
+    ground = np.array([0.25, 0.2, 0.15]) * sky_radiance
+    img = np.where(d[..., 1:2] > 0, sky, ground)
+    el, az = np.deg2rad(sun_elevation_deg), np.deg2rad(sun_azimuth_deg)
+    sun = np.array([np.cos(el) * np.sin(az), np.sin(el), -np.cos(el) * np.cos(az)])
+    in_sun = d @ sun > np.cos(np.deg2rad(sun_radius_deg))
+    if not in_sun.any():  # a disc smaller than a pixel: light the nearest pixel
+        in_sun = np.zeros(in_sun.shape, bool)
+        in_sun[np.unravel_index(np.argmax(d @ sun), in_sun.shape)] = True
+    img = np.where(in_sun[..., None], sun_radiance * np.array([1.0, 0.95, 0.85]), img)
+    return EnvironmentLight(img)
+
+
+__all__ = ["EnvironmentLight", "load_envmap", "procedural_sky"]

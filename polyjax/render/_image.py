@@ -1,0 +1,176 @@
+"""Images: OpenEXR input/output (linear RGB float), sRGB previews, difference images, figures."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from jaxtyping import ArrayLike
+
+from .._errors import DataFormatError, DataNotFoundError, InputError
+from .._metrics import psnr
+
+
+def _as_rgb(image, name="image") -> np.ndarray:
+    a = np.asarray(image)
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=-1)
+    if a.ndim != 3 or a.shape[-1] not in (3, 4):
+        raise InputError(f"{name}: expected an (H, W, 3) RGB image (or (H, W) grey), found shape {a.shape}")
+    return a[..., :3]
+
+
+def write_exr(path: str | os.PathLike, image: ArrayLike) -> Path:
+    """Write an ``(H, W, 3)`` linear RGB image as a 32-bit float OpenEXR file (ZIP compression).
+
+    Returns:
+        The path written.
+    """
+    import OpenEXR
+
+    rgb = np.ascontiguousarray(_as_rgb(image), dtype=np.float32)
+    path = Path(path)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": rgb}) as f:
+        f.write(str(path))
+    return path
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    """Read an OpenEXR file into an ``(H, W, 3)`` float32 array (linear RGB).
+
+    Accepts ``R``, ``G``, ``B`` channels (any pixel type) or a single ``Y`` channel (grey).
+
+    Raises:
+        DataNotFoundError: the file does not exist.
+        DataFormatError: the file is not a readable EXR with RGB or Y channels.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataNotFoundError(f"EXR file {str(path)!r} does not exist")
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            ch = {k: np.asarray(c.pixels) for k, c in f.channels().items()}
+    except Exception as e:  # OpenEXR raises plain exceptions on malformed files
+        raise DataFormatError(path, "an OpenEXR image", f"an unreadable file ({e})") from None
+    if all(k in ch for k in "RGB"):
+        return np.stack([ch["R"], ch["G"], ch["B"]], axis=-1).astype(np.float32)
+    if "Y" in ch:
+        return np.repeat(ch["Y"][..., None], 3, axis=-1).astype(np.float32)
+    raise DataFormatError(path, "channels R, G, B (or Y)", f"channels {sorted(ch)}")
+
+
+def to_srgb(image: ArrayLike, exposure: float = 0.0, tonemap: str = "clip") -> np.ndarray:
+    r"""Tone-map linear radiance to display sRGB in ``[0, 1]``.
+
+    ``x = 2^exposure L``; ``tonemap="reinhard"`` maps ``x -> x / (1 + x)``, ``"clip"`` keeps ``x``;
+    then ``x`` is clipped to ``[0, 1]`` and encoded with the sRGB transfer function
+    (``12.92 x`` below 0.0031308, else ``1.055 x^{1/2.4} - 0.055``). Non-finite values become 0.
+    """
+    x = _as_rgb(image).astype(np.float64) * 2.0 ** float(exposure)
+    x = np.where(np.isfinite(x), x, 0.0)
+    if tonemap == "reinhard":
+        x = np.maximum(x, 0.0)
+        x = x / (1.0 + x)
+    elif tonemap != "clip":
+        raise InputError(f"tonemap: expected 'clip' or 'reinhard', found {tonemap!r}")
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def write_png(path: str | os.PathLike, image: ArrayLike, exposure: float = 0.0, tonemap: str = "clip",
+              srgb: bool = True) -> Path:
+    """Write a preview PNG: tone-mapped sRGB (``srgb=True``) or an image already in ``[0, 1]`` display values."""
+    import matplotlib.image
+
+    disp = to_srgb(image, exposure, tonemap) if srgb else np.clip(_as_rgb(image), 0.0, 1.0)
+    path = Path(path)
+    matplotlib.image.imsave(str(path), (np.round(disp * 255)).astype(np.uint8))
+    return path
+
+
+def difference_images(images: Sequence[ArrayLike], reference: ArrayLike, scale: float | None = None
+                      ) -> tuple[np.ndarray, float]:
+    """Absolute differences to a reference on one common scale (the insets of the paper's Fig. 4).
+
+    ``D_k = mean_c |I_k - R| / s`` clipped to ``[0, 1]``, where ``s`` is shared by all images: by
+    default the largest absolute difference over every image, so the insets are comparable.
+
+    Returns:
+        ``(D, s)``: ``(K, H, W)`` differences in ``[0, 1]`` and the scale ``s`` used.
+    """
+    ref = _as_rgb(reference).astype(np.float64)
+    diffs = []
+    for k, im in enumerate(images):
+        a = _as_rgb(im, f"images[{k}]").astype(np.float64)
+        if a.shape != ref.shape:
+            raise InputError(f"images[{k}]: expected the reference's shape {ref.shape}, found {a.shape}")
+        diffs.append(np.mean(np.abs(a - ref), axis=-1))
+    d = np.stack(diffs) if diffs else np.zeros((0,) + ref.shape[:2])
+    s = float(np.max(d)) if scale is None else float(scale)
+    s = s if s > 0 else 1.0
+    return np.clip(d / s, 0.0, 1.0), s
+
+
+def mosaic(images: Sequence[Sequence[ArrayLike]] | np.ndarray, pad: int = 2, fill: float = 1.0) -> np.ndarray:
+    """Assemble a ``rows x cols`` grid of equally sized ``(H, W, 3)`` images into one image."""
+    rows = [[_as_rgb(im) for im in row] for row in images]
+    if not rows or not rows[0]:
+        raise InputError("images: expected at least one row with one image")
+    h, w = rows[0][0].shape[:2]
+    n_r, n_c = len(rows), max(len(r) for r in rows)
+    out = np.full((n_r * h + (n_r + 1) * pad, n_c * w + (n_c + 1) * pad, 3), fill, dtype=np.float32)
+    for i, row in enumerate(rows):
+        for j, im in enumerate(row):
+            if im.shape[:2] != (h, w):
+                raise InputError(f"images[{i}][{j}]: expected size {(h, w)}, found {im.shape[:2]}")
+            y, x = pad + i * (h + pad), pad + j * (w + pad)
+            out[y : y + h, x : x + w] = im
+    return out
+
+
+def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Sequence[ArrayLike],
+                      names: Sequence[str], reference_name: str = "measured", exposure: float = 0.0,
+                      tonemap: str = "clip", mask: ArrayLike | None = None) -> dict[str, float]:
+    """Save a figure like the paper's Fig. 4: the reference beside each model's rendering, each with
+    its difference image (common scale) and its PSNR in dB against the reference (Table 3).
+
+    PSNR is computed on the tone-mapped sRGB images (peak 1), optionally only inside ``mask``.
+
+    Returns:
+        ``{name: psnr_dB}``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if len(names) != len(images):
+        raise InputError(f"names: expected {len(images)} names (one per image), found {len(names)}")
+    ref_d = to_srgb(reference, exposure, tonemap)
+    disp = [to_srgb(im, exposure, tonemap) for im in images]
+    diffs, scale = difference_images(disp, ref_d)
+    m = None if mask is None else np.asarray(mask)[..., None]
+    scores = {n: float(psnr(d, ref_d, peak=1.0, mask=m)) for n, d in zip(names, disp)}
+    k = len(images) + 1
+    fig, ax = plt.subplots(2, k, figsize=(2.2 * k, 4.6), squeeze=False)
+    ax[0, 0].imshow(ref_d)
+    ax[0, 0].set_title(reference_name, fontsize=9)
+    ax[1, 0].text(0.5, 0.5, f"|difference|\nscale 0..{scale:.3g}", ha="center", va="center", fontsize=8)
+    for j, (n, d, df) in enumerate(zip(names, disp, diffs), start=1):
+        ax[0, j].imshow(d)
+        ax[0, j].set_title(f"{n}\n{scores[n]:.2f} dB", fontsize=9)
+        ax[1, j].imshow(df, cmap="inferno", vmin=0.0, vmax=1.0)
+    for a in ax.ravel():
+        a.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(str(path), dpi=100)
+    plt.close(fig)
+    return scores
+
+
+__all__ = ["comparison_figure", "difference_images", "mosaic", "read_exr", "to_srgb", "write_exr", "write_png"]

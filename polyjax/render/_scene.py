@@ -1,0 +1,255 @@
+"""Scene description: a camera, analytic spheres and planes, and lights.
+
+World frame: right-handed, ``+y`` up. Each object carries its BRDF (a callable
+``f(u, v) -> (..., 3)``, see :mod:`polyjax.render._brdf`) and defines the local shading frame
+``(t, b, n)`` in which the BRDF is evaluated: ``n`` the outward normal, ``t`` a tangent (the
+BRDF's ``+x``), ``b = n x t``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import InputError
+from ._brdf import BRDF, rgb_brdf
+
+
+def _vec3(x, name) -> Array:
+    a = np.asarray(x, dtype=float)
+    if a.shape == ():
+        a = np.full((3,), float(a))
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise InputError(f"{name}: expected a finite 3-vector (or scalar), found {np.asarray(x).tolist()!r}")
+    return jnp.asarray(a)
+
+
+class Camera(eqx.Module):
+    """A pinhole (or orthographic) camera.
+
+    Attributes:
+        eye, target, up: position, look-at point and up hint (world).
+        fov_deg: vertical field of view (perspective).
+        width, height: image size in pixels.
+        ortho_height: if > 0, an orthographic camera whose view is this tall (world units).
+    """
+
+    eye: Float[Array, "3"]
+    target: Float[Array, "3"]
+    up: Float[Array, "3"]
+    fov_deg: Float[Array, ""]
+    ortho_height: Float[Array, ""]
+    width: int = eqx.field(static=True)
+    height: int = eqx.field(static=True)
+
+    def __init__(self, eye: ArrayLike = (0.0, 0.0, 4.0), target: ArrayLike = (0.0, 0.0, 0.0),
+                 up: ArrayLike = (0.0, 1.0, 0.0), fov_deg: float = 30.0, width: int = 256, height: int = 256,
+                 ortho_height: float = 0.0):
+        if int(width) < 1 or int(height) < 1:
+            raise InputError(f"width, height: expected positive pixel counts, found {width} x {height}")
+        if not 0.0 < float(fov_deg) < 180.0:
+            raise InputError(f"fov_deg: expected a field of view in (0, 180) degrees, found {fov_deg}")
+        self.eye = _vec3(eye, "eye")
+        self.target = _vec3(target, "target")
+        self.up = _vec3(up, "up")
+        if np.linalg.norm(np.cross(np.asarray(self.target - self.eye), np.asarray(self.up))) < 1e-9:
+            raise InputError("up: expected a direction not parallel to the viewing direction target - eye")
+        self.fov_deg = jnp.asarray(float(fov_deg))
+        self.ortho_height = jnp.asarray(float(ortho_height))
+        self.width = int(width)
+        self.height = int(height)
+
+    def rays(self) -> tuple[Float[Array, "n 3"], Float[Array, "n 3"]]:
+        """Origins and unit directions of the primary rays through pixel centres, row-major from the top."""
+        w = self.target - self.eye
+        w = w / jnp.linalg.norm(w)
+        r = jnp.cross(w, self.up)
+        r = r / jnp.linalg.norm(r)
+        up = jnp.cross(r, w)
+        aspect = self.width / self.height
+        ys = 1.0 - 2.0 * (jnp.arange(self.height, dtype=w.dtype) + 0.5) / self.height
+        xs = (2.0 * (jnp.arange(self.width, dtype=w.dtype) + 0.5) / self.width - 1.0) * aspect
+        X, Y = jnp.meshgrid(xs, ys)
+        X, Y = X.reshape(-1, 1), Y.reshape(-1, 1)
+        ortho = self.ortho_height > 0
+        half = jnp.where(ortho, 0.5 * self.ortho_height, jnp.tan(0.5 * jnp.deg2rad(self.fov_deg)))
+        persp_d = w + half * (X * r + Y * up)
+        persp_d = persp_d / jnp.linalg.norm(persp_d, axis=-1, keepdims=True)
+        d = jnp.where(ortho, jnp.broadcast_to(w, persp_d.shape), persp_d)
+        o = jnp.where(ortho, self.eye + half * (X * r + Y * up), jnp.broadcast_to(self.eye, persp_d.shape))
+        return o, d
+
+
+class Sphere(eqx.Module):
+    """An analytic sphere. Tangent ``t`` follows the circles of latitude about ``+y`` (``+x`` at the poles)."""
+
+    center: Float[Array, "3"]
+    radius: Float[Array, ""]
+    brdf: BRDF
+
+    def __init__(self, brdf, center: ArrayLike = (0.0, 0.0, 0.0), radius: float = 1.0):
+        if not float(radius) > 0:
+            raise InputError(f"radius: expected a positive radius, found {radius}")
+        self.center = _vec3(center, "center")
+        self.radius = jnp.asarray(float(radius))
+        self.brdf = rgb_brdf(brdf)
+
+
+class Plane(eqx.Module):
+    """An infinite plane ``n . x = offset`` (one-sided, facing ``normal``); tangent: ``tangent`` projected."""
+
+    normal: Float[Array, "3"]
+    offset: Float[Array, ""]
+    tangent: Float[Array, "3"]
+    brdf: BRDF
+
+    def __init__(self, brdf, height: float = -1.0, normal: ArrayLike = (0.0, 1.0, 0.0),
+                 tangent: ArrayLike = (1.0, 0.0, 0.0)):
+        n = np.asarray(_vec3(normal, "normal"))
+        n = n / np.linalg.norm(n)
+        t = np.asarray(_vec3(tangent, "tangent"))
+        t = t - n * (t @ n)
+        if np.linalg.norm(t) < 1e-9:
+            raise InputError("tangent: expected a direction not parallel to the plane normal")
+        self.normal = jnp.asarray(n)
+        self.offset = jnp.asarray(float(height))
+        self.tangent = jnp.asarray(t / np.linalg.norm(t))
+        self.brdf = rgb_brdf(brdf)
+
+
+class DirectionalLight(eqx.Module):
+    """A distant light: irradiance ``irradiance`` (RGB, on a surface facing it) from ``direction`` (towards the light)."""
+
+    direction: Float[Array, "3"]
+    irradiance: Float[Array, "3"]
+
+    def __init__(self, direction: ArrayLike = (0.0, 0.0, 1.0), irradiance: ArrayLike = 1.0):
+        d = np.asarray(_vec3(direction, "direction"))
+        if np.linalg.norm(d) == 0:
+            raise InputError("direction: expected a non-zero vector")
+        self.direction = jnp.asarray(d / np.linalg.norm(d))
+        self.irradiance = _vec3(irradiance, "irradiance")
+
+
+class PointLight(eqx.Module):
+    """An isotropic point light of radiant intensity ``intensity`` (RGB); irradiance ``I cos / r^2``."""
+
+    position: Float[Array, "3"]
+    intensity: Float[Array, "3"]
+
+    def __init__(self, position: ArrayLike = (2.0, 2.0, 4.0), intensity: ArrayLike = 24.0):
+        self.position = _vec3(position, "position")
+        self.intensity = _vec3(intensity, "intensity")
+
+
+class Scene(eqx.Module):
+    """Everything a render needs.
+
+    Attributes:
+        camera: the :class:`Camera`.
+        objects: tuple of :class:`Sphere` / :class:`Plane`.
+        lights: tuple of :class:`DirectionalLight`, :class:`PointLight` and at most one
+            :class:`polyjax.render.EnvironmentLight`.
+        background: RGB radiance of rays that hit nothing (used when there is no environment map).
+        max_bounces: indirect bounces to simulate (0: direct lighting only).
+    """
+
+    camera: Camera
+    objects: tuple
+    lights: tuple
+    background: Float[Array, "3"]
+    max_bounces: int = eqx.field(static=True)
+
+    def __init__(self, camera: Camera, objects, lights, background: ArrayLike = 0.0, max_bounces: int = 0):
+        from ._envmap import EnvironmentLight
+
+        objects = tuple(objects) if isinstance(objects, (list, tuple)) else (objects,)
+        lights = tuple(lights) if isinstance(lights, (list, tuple)) else (lights,)
+        if not isinstance(camera, Camera):
+            raise InputError(f"camera: expected a polyjax.render.Camera, found {type(camera).__name__}")
+        for i, o in enumerate(objects):
+            if not isinstance(o, (Sphere, Plane)):
+                raise InputError(f"objects[{i}]: expected a Sphere or Plane, found {type(o).__name__}")
+        n_env = 0
+        for i, li in enumerate(lights):
+            if not isinstance(li, (DirectionalLight, PointLight, EnvironmentLight)):
+                raise InputError(
+                    f"lights[{i}]: expected a DirectionalLight, PointLight or EnvironmentLight, found {type(li).__name__}"
+                )
+            n_env += isinstance(li, EnvironmentLight)
+        if n_env > 1:
+            raise InputError(f"lights: expected at most one EnvironmentLight, found {n_env}")
+        if int(max_bounces) < 0:
+            raise InputError(f"max_bounces: expected >= 0, found {max_bounces}")
+        self.camera = camera
+        self.objects = objects
+        self.lights = lights
+        self.background = _vec3(background, "background")
+        self.max_bounces = int(max_bounces)
+
+    @property
+    def environment(self):
+        """The scene's :class:`EnvironmentLight`, or None."""
+        from ._envmap import EnvironmentLight
+
+        envs = [li for li in self.lights if isinstance(li, EnvironmentLight)]
+        return envs[0] if envs else None
+
+    @property
+    def point_lights(self) -> tuple:
+        """Directional and point lights."""
+        return tuple(li for li in self.lights if isinstance(li, (DirectionalLight, PointLight)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Effects:
+    """Which light-transport effects a render computes (decided before tracing by :func:`plan_effects`).
+
+    Attributes:
+        direct_point: direct lighting from directional/point lights (closed form per pixel: one BRDF evaluation per light).
+        shadows: visibility (shadow) rays towards lights; only when an object can occlude another.
+        environment: environment-map lighting, importance-sampled (``spp`` samples per pixel).
+        indirect: light reflected between objects (``max_bounces`` bounces, ``spp`` paths per pixel).
+    """
+
+    direct_point: bool = False
+    shadows: bool = False
+    environment: bool = False
+    indirect: bool = False
+
+    @classmethod
+    def all(cls) -> "Effects":
+        return cls(True, True, True, True)
+
+    def names(self) -> tuple[str, ...]:
+        """The names of the effects that are on."""
+        return tuple(f.name for f in dataclasses.fields(self) if getattr(self, f.name))
+
+
+def plan_effects(scene: Scene) -> Effects:
+    """Decide from the scene, before any ray is traced, which effects exist.
+
+    - ``direct_point``: the scene has a directional or point light.
+    - ``shadows``: there is a light and at least two objects. One sphere or one plane is convex
+      (or flat) and cannot occlude itself; its self-shadowing is exactly the ``max(0, n . l)``
+      factor, so a lone object needs no shadow ray.
+    - ``environment``: the scene has an :class:`EnvironmentLight`.
+    - ``indirect``: ``max_bounces > 0`` and at least two objects (light leaving a lone convex or
+      flat object never returns to it, so bounces there contribute nothing).
+    """
+    n_obj = len(scene.objects)
+    has_point = bool(scene.point_lights)
+    has_env = scene.environment is not None
+    return Effects(
+        direct_point=has_point,
+        shadows=n_obj >= 2 and (has_point or has_env),
+        environment=has_env,
+        indirect=scene.max_bounces > 0 and n_obj >= 2,
+    )
+
+
+__all__ = ["Camera", "DirectionalLight", "Effects", "Plane", "PointLight", "Scene", "Sphere", "plan_effects"]
