@@ -54,7 +54,7 @@ from typing import Sequence
 import numpy as np
 
 from .._errors import InputError
-from .._measurements import Measurements, make_measurements
+from .._measurements import Measurements
 from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
 
 #: The resolution of the MERL database ``(n_theta_h, n_theta_d, n_phi_d)``.
@@ -336,8 +336,19 @@ def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarr
     return np.sort(rng.choice(idx, size=count, replace=False))
 
 
+@functools.lru_cache(maxsize=2)
+def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
+    """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set); cached."""
+    import jax.numpy as jnp
+
+    u, v, w, above = merl_grid(resolution)
+    return tuple(jnp.asarray(a[above], dtype_name) for a in (u, v, w))
+
+
 def _merl_measurements(values, valid, resolution, *, subsample, seed, names, source) -> Measurements:
     """values ``(m, 3, N)`` with ``valid`` ``(m, 3, N)`` -> Measurements over the kept bins."""
+    import jax.numpy as jnp
+
     u, v, w, above = merl_grid(tuple(resolution))
     keep = _choose_bins(above & valid.any(axis=(0, 1)), subsample, seed, source)
     vals = values[..., keep]
@@ -345,9 +356,14 @@ def _merl_measurements(values, valid, resolution, *, subsample, seed, names, sou
     single = vals.shape[0] == 1
     if single:
         vals, mask = vals[0], mask[0]
-    return make_measurements(
-        u[keep], v[keep], np.where(mask, vals, 0.0), weights=w[keep], mask=mask,
-        names=() if single else names, channels=("R", "G", "B"),
+    dtype = jnp.dtype(jnp.result_type(float))
+    if keep.size == int(above.sum()):  # all bins above the horizon: reuse the cached device arrays
+        du, dv, dw = _device_grid(tuple(resolution), dtype.name)
+    else:
+        du, dv, dw = (jnp.asarray(a[keep], dtype) for a in (u, v, w))
+    return Measurements(
+        u=du, v=dv, values=jnp.asarray(np.where(mask, vals, 0.0), dtype), weights=dw, mask=jnp.asarray(mask),
+        names=() if single else tuple(names), channels=("R", "G", "B"),
         axes=("channel",) if single else ("material", "channel"), source=source,
     )
 

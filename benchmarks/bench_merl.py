@@ -1,0 +1,76 @@
+"""Load + fit time per MERL material (3 channels, lafortune variables, p = 5) on all valid bins.
+
+Two sources per material: a MERL ``.binary`` file of the real layout (written once from the neural fit
+into a temporary folder) and the neural-BRDF networks evaluated on the MERL grid. The physical floor
+is the time to stream the same 34,992,012 bytes from memory (a ``numpy`` copy of an in-memory buffer),
+measured in the same run. Target: load + fit under 1 s per material on a 2-core CPU.
+
+Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_merl.py [n_materials]``
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import polyjax as pj  # noqa: E402
+
+
+def best_of(fn, repeat=3):
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def fit(d):
+    m = pj.fit_polynomial(d, variables="lafortune", degree=5)
+    m.coefficients.block_until_ready()
+    return m
+
+
+def main(n_materials: int = 6):
+    names = pj.data.TABLE3_MATERIALS[:n_materials]
+    with tempfile.TemporaryDirectory() as tmp:
+        files = {}
+        _, _, _, above = pj.data.merl_grid()
+        for name in names:
+            d = pj.data.load_merl_nbrdf(name)
+            full = np.full((3, pj.data.MERL_N_BINS), -1.0)
+            full[:, above] = np.asarray(d.values)
+            files[name] = pj.data.write_merl_binary(Path(tmp) / f"{name}.binary", full)
+        # warm-up: compile the fit kernel and the network once for this shape
+        fit(pj.data.load_merl_binary(files[names[0]]))
+        fit(pj.data.load_merl_nbrdf(names[0]))
+
+        blob = files[names[0]].read_bytes()
+        floor = best_of(lambda: np.frombuffer(blob, np.uint8).copy())
+        rows = []
+        for name in names:
+            t_bin_load = best_of(lambda: pj.data.load_merl_binary(files[name]).values.block_until_ready(), 2)
+            t_nb_load = best_of(lambda: pj.data.load_merl_nbrdf(name).values.block_until_ready(), 2)
+            d = pj.data.load_merl_binary(files[name])
+            t_fit = best_of(lambda: fit(d), 2)
+            l2 = np.asarray(fit(d).l2)
+            rows.append((name, d.n_samples, t_bin_load, t_nb_load, t_fit, l2))
+    print(f"stream {len(blob):,} bytes from memory (floor): {floor * 1e3:.1f} ms")
+    print(f"{'material':22s} {'n':>9s} {'binary load':>12s} {'nbrdf load':>11s} {'fit p=5':>9s} "
+          f"{'bin load+fit':>13s} {'/floor':>7s}  L2 (R, G, B)")
+    for name, n, tb, tn, tf, l2 in rows:
+        tot = tb + tf
+        print(f"{name:22s} {n:9d} {tb * 1e3:10.0f}ms {tn * 1e3:9.0f}ms {tf * 1e3:7.0f}ms {tot * 1e3:11.0f}ms "
+              f"{tot / floor:7.0f}  {np.array2string(l2, precision=4)}")
+    mean = np.mean([r[2] + r[4] for r in rows])
+    print(f"mean load+fit per material: {mean:.2f} s (target < 1 s): {'met' if mean < 1 else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 6)
