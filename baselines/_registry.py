@@ -1,0 +1,56 @@
+"""The table of baseline models by name."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from polyjax import UnknownNameError
+
+from . import (
+    _ashikhmin_shirley,
+    _blinn_phong,
+    _cook_torrance,
+    _lafortune,
+    _lafortune_anisotropic,
+    _oren_nayar,
+    _ward,
+    _ward_anisotropic,
+    _ward_duer,
+)
+from ._common import REAL, BaselineModel
+from ._zernike import n_zernike_terms, zernike
+
+ZERNIKE = BaselineModel(
+    name="zernike",
+    param_names=tuple(f"c{j}" for j in range(n_zernike_terms(8))),
+    transforms=(REAL,) * n_zernike_terms(8),
+    evaluate=zernike,
+    n_linear=n_zernike_terms(8),
+    columns=None,
+    guesses=np.zeros((1, 0)),
+    sample=None,
+    reference="Koenderink, van Doorn, Stavridi, ECCV 1996",
+    linear=True,
+)
+
+_ALL = (
+    _ashikhmin_shirley.MODEL, _blinn_phong.MODEL, _cook_torrance.MODEL, _lafortune.MODEL, _oren_nayar.MODEL,
+    _ward.MODEL, _ward_duer.MODEL, ZERNIKE, _lafortune_anisotropic.MODEL, _ward_anisotropic.MODEL,
+)
+REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}
+
+#: Every model name accepted by :func:`baselines.fit` and :func:`baselines.get_model`.
+MODELS: tuple[str, ...] = tuple(REGISTRY)
+#: The paper's seven nonlinear models plus Zernike (its Table 2 rows), isotropic.
+PAPER_MODELS: tuple[str, ...] = MODELS[:8]
+#: The nonlinear isotropic models (fitted by Levenberg-Marquardt).
+NONLINEAR_MODELS: tuple[str, ...] = MODELS[:7]
+
+
+
+def get_model(name: str) -> BaselineModel:
+    """The :class:`BaselineModel` record of ``name`` (case and ``_``/space insensitive)."""
+    key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
+    if key not in REGISTRY:
+        raise UnknownNameError(f"baseline model {name!r}: expected one of {list(MODELS)}")
+    return REGISTRY[key]

@@ -1,0 +1,120 @@
+r"""Zernike-polynomial BRDF (Koenderink, van Doorn, Stavridi 1996), isotropic and reciprocal, linear.
+
+**Hemisphere to disk.** Each direction ``w = (x, y, z)`` (``z = cos theta``) goes to the unit disk
+by the equal-area (Lambert azimuthal) map ``rho = sqrt(2) sin(theta / 2)``, ``phi`` unchanged, i.e.
+the disk point ``p = (x, y) / sqrt(1 + z)`` with ``rho^2 = 1 - z``: no angles and no division
+by ``sin theta`` are needed.
+
+**Basis.** Disk Zernike functions are ``Z_n^{+-m}(rho, phi) = R_n^m(rho) {cos, sin}(m phi)`` with
+``n - m`` even and ``0 <= m <= n``. A BRDF expanded in products ``Z_n^m(u) Z_{n'}^{m'}(v)`` is
+isotropic (depends on ``phi_u - phi_v`` only) exactly when ``m = m'`` and the cos/sin parts pair
+up as ``cos(m phi_u) cos(m phi_v) + sin(m phi_u) sin(m phi_v) = cos(m (phi_u - phi_v))``, and it is
+reciprocal when the coefficient of ``(n, n')`` equals that of ``(n', n)``. The isotropic, reciprocal
+basis of order ``N`` is therefore
+
+.. math::
+    B_{m,n,n'}(u, v) = \tfrac12\big[R_n^m(\rho_u) R_{n'}^m(\rho_v) + R_{n'}^m(\rho_u) R_n^m(\rho_v)\big]
+                       \cos(m(\phi_u - \phi_v)), \qquad m \le n \le n' \le N,\ n \equiv n' \equiv m \pmod 2 .
+
+**Counting.** For each ``m`` there are ``k_m = floor((N - m)/2) + 1`` radial orders, hence
+``k_m (k_m + 1) / 2`` unordered pairs; the total over ``m = 0..N`` is 5 for ``N = 2``
+(3 + 1 + 1) and 55 for ``N = 8`` (15 + 10 + 10 + 6 + 6 + 3 + 3 + 1 + 1): the parameter counts the
+paper gives (its Fig. 7) for orders 2 and 8.
+
+It is evaluated without angles as ``Q_n^m(rho_u^2) Q_{n'}^m(rho_v^2) Re[(p_u conj(p_v))^m]``, where
+``R_n^m(rho) = rho^m Q_n^m(rho^2)`` and ``p`` is the complex disk point. The model ``f = sum c_j B_j``
+is fitted to the BRDF values themselves, by the closed-form weighted solve of polyjax
+(:func:`polyjax.weighted_lstsq`) on the same objective as every other model.
+"""
+
+from __future__ import annotations
+
+import functools
+from math import factorial
+
+import jax.numpy as jnp
+import numpy as np
+
+from polyjax import InputError
+
+
+@functools.lru_cache(maxsize=None)
+def zernike_terms(order: int) -> tuple[tuple[int, int, int], ...]:
+    """The ``(m, n, n')`` index triples of the isotropic reciprocal basis of ``order`` (see module docs)."""
+    if not isinstance(order, (int, np.integer)) or order < 0:
+        raise InputError(f"order: expected a non-negative integer, found {order!r}")
+    out = []
+    for m in range(order + 1):
+        ns = list(range(m, order + 1, 2))
+        for i, n in enumerate(ns):
+            for n2 in ns[i:]:
+                out.append((m, n, n2))
+    return tuple(out)
+
+
+def n_zernike_terms(order: int) -> int:
+    """Number of basis functions: 5 at order 2, 55 at order 8."""
+    return len(zernike_terms(order))
+
+
+@functools.lru_cache(maxsize=None)
+def _order_of(n_params: int) -> int:
+    for order in range(0, 41):
+        if n_zernike_terms(order) == n_params:
+            return order
+    raise InputError(f"zernike: {n_params} coefficients is not the size of any order's basis")
+
+
+def _radial_q(n: int, m: int, r2):
+    """``Q_n^m(rho^2) = R_n^m(rho) / rho^m`` as a polynomial in ``rho^2``."""
+    out = jnp.zeros_like(r2)
+    for k in range((n - m) // 2 + 1):
+        c = (-1) ** k * factorial(n - k) / (factorial(k) * factorial((n + m) // 2 - k) * factorial((n - m) // 2 - k))
+        out = out + c * r2 ** ((n - m) // 2 - k)
+    return out
+
+
+def disk_point(w):
+    """Equal-area map of the upper hemisphere to the unit disk: ``(p_x, p_y, rho^2)`` (below the horizon: the rim)."""
+    w = jnp.asarray(w)
+    z = jnp.clip(w[..., 2], 0.0, 1.0)
+    s = 1.0 / jnp.sqrt(1.0 + z)
+    return w[..., 0] * s, w[..., 1] * s, 1.0 - z
+
+
+def zernike_design(u, v, order: int = 8):
+    """The ``(..., n_terms)`` basis values ``B_j(u, v)`` (see module docs)."""
+    terms = zernike_terms(order)
+    ux, uy, ru = disk_point(u)
+    vx, vy, rv = disk_point(v)
+    # z = p_u conj(p_v) = rho_u rho_v exp(i (phi_u - phi_v))
+    a = ux * vx + uy * vy
+    b = uy * vx - ux * vy
+    powers = [jnp.ones_like(a)]
+    re, im = jnp.ones_like(a), jnp.zeros_like(a)
+    for _ in range(order):
+        re, im = re * a - im * b, re * b + im * a
+        powers.append(re)
+    qu = {(n, m): _radial_q(n, m, ru) for (m, n, _) in terms}
+    qv = {(n, m): _radial_q(n, m, rv) for (m, n, _) in terms}
+    qu.update({(n2, m): _radial_q(n2, m, ru) for (m, _, n2) in terms if (n2, m) not in qu})
+    qv.update({(n2, m): _radial_q(n2, m, rv) for (m, _, n2) in terms if (n2, m) not in qv})
+    cols = [0.5 * (qu[(n, m)] * qv[(n2, m)] + qu[(n2, m)] * qv[(n, m)]) * powers[m] for (m, n, n2) in terms]
+    return jnp.stack(cols, axis=-1)
+
+
+def zernike(params, u, v):
+    r"""Isotropic, reciprocal Zernike BRDF ``f(u, v) = sum_j c_j B_j(u, v)`` (see module docs).
+
+    Reference: J. J. Koenderink, A. J. van Doorn, M. Stavridi, "Bidirectional reflection
+    distribution function expressed in terms of surface scattering modes", ECCV 1996.
+
+    Args:
+        params: ``(n_terms,)`` coefficients; the order is inferred from the count (55 -> order 8, 5 -> order 2).
+        u, v: ``(..., 3)`` light and view directions.
+
+    Returns:
+        ``f`` with the shape of ``u[..., 0]``.
+    """
+    order = _order_of(int(params.shape[-1]))
+    return zernike_design(u, v, order) @ params
