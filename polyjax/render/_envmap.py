@@ -98,6 +98,36 @@ class EnvironmentLight(eqx.Module):
         return d, self.image.astype(dtype)[i, j] * inv_pdf[..., None]
 
 
+def sample_pool(env: EnvironmentLight, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Draw ``n`` importance samples of ``env`` once, in float64 numpy (see :meth:`EnvironmentLight.sample`).
+
+    The renderer draws a pool like this per render and lets each pixel use its own pseudo-random
+    subset of it: no random-number generation or trigonometry per pixel and sample, and the same
+    arithmetic whatever else the render computes.
+
+    Returns:
+        ``(d, L / pdf)``: ``(n, 3)`` directions and ``(n, 3)`` radiance over density.
+    """
+    img = np.asarray(env.image, dtype=np.float64)
+    h, w, _ = img.shape
+    pmf = np.asarray(env.pmf, dtype=np.float64)
+    cdf = np.cumsum(pmf)
+    cdf /= cdf[-1]
+    rng = np.random.default_rng(seed)
+    # stratified in the pixel-selection coordinate, then shuffled: a low-variance pool
+    x0 = (np.arange(n) + rng.random(n)) / n
+    k = np.clip(np.searchsorted(cdf, x0, side="right"), 0, h * w - 1)
+    k = k[rng.permutation(n)]
+    i, j = k // w, k % w
+    theta = (i + rng.random(n)) * np.pi / h
+    phi = (j + rng.random(n)) * 2 * np.pi / w - np.pi
+    st = np.sin(theta)
+    d = np.stack([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)], axis=-1)
+    p = pmf[k]
+    inv_pdf = np.where(p > 0, 2 * np.pi**2 * st / (np.where(p > 0, p, 1.0) * h * w), 0.0)
+    return d, img[i, j] * inv_pdf[:, None]
+
+
 def load_envmap(path: str | os.PathLike, scale: float = 1.0) -> EnvironmentLight:
     """Read a latitude-longitude environment map from an OpenEXR file (linear RGB)."""
     from ._image import read_exr
@@ -132,4 +162,4 @@ def procedural_sky(height: int = 64, width: int = 128, sun_elevation_deg: float 
     return EnvironmentLight(img)
 
 
-__all__ = ["EnvironmentLight", "load_envmap", "procedural_sky"]
+__all__ = ["EnvironmentLight", "load_envmap", "procedural_sky", "sample_pool"]

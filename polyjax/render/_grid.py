@@ -24,7 +24,8 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
 from ._brdf import Lambertian, evaluate_rgb, rgb_brdf
-from ._integrator import _ENV_KEY, _direct, _frame, _intersect, _to_local, cast_floats
+from ._envmap import sample_pool
+from ._integrator import _ENV_KEY, _direct, _frame, _intersect, _pool_size, _to_local, cast_floats
 from ._scene import Camera, DirectionalLight, Effects, Scene, Sphere, plan_effects
 
 
@@ -61,7 +62,7 @@ def _group_key(b):
 
 
 @eqx.filter_jit
-def _grid_impl(scene: Scene, groups, key, effects: Effects, spp: int):
+def _grid_impl(scene: Scene, groups, pool, seed, effects: Effects, spp: int):
     cam = scene.camera
     o, d = cam.rays()
     dtype = scene.background.dtype
@@ -72,12 +73,13 @@ def _grid_impl(scene: Scene, groups, key, effects: Effects, spp: int):
     frame = _frame((sphere,), p, idx)
     vl = _to_local(frame, -d)
     point_lights = scene.point_lights if effects.direct_point else ()
-    env = scene.environment if effects.environment else None
+    pix = jnp.arange(cam.width * cam.height, dtype=jnp.uint32)
+    salt = seed ^ jnp.uint32(_ENV_KEY)
     background = scene.environment.radiance(d) if scene.environment is not None else jnp.broadcast_to(scene.background, d.shape)
 
     def shade(brdf_module):
-        rad = _direct(lambda u, v: evaluate_rgb(brdf_module, u, v), p, frame, vl, point_lights, env,
-                      jax.random.fold_in(key, _ENV_KEY), spp, None)
+        rad = _direct(lambda u, v: evaluate_rgb(brdf_module, u, v), p, frame, vl, point_lights, pool, salt, pix, spp,
+                      None)
         return jnp.where(hit[..., None], rad, background).reshape(cam.height, cam.width, 3)
 
     outs = []
@@ -98,7 +100,7 @@ def render_grid(brdfs: Sequence[Sequence], scene: Scene | None = None, *, size: 
         scene: a scene with exactly one :class:`Sphere` (its BRDF is ignored) and its lights;
             default :func:`sphere_scene` of ``size`` pixels.
         spp: environment samples per pixel (used only when the scene has an environment map).
-        seed: random seed of the environment samples (the same samples for every cell).
+        seed: random seed of the environment samples (the same samples for every cell, as in :func:`render`).
         dtype: floating-point type of the computation.
 
     Returns:
@@ -129,7 +131,11 @@ def render_grid(brdfs: Sequence[Sequence], scene: Scene | None = None, *, size: 
         else:
             groups.append((None, b0))
         where.append(members)
-    outs, hit = _grid_impl(scene, groups, jax.random.key(seed), effects, int(spp))
+    pool = None
+    if effects.environment:
+        pool = tuple(jnp.asarray(a, dtype) for a in sample_pool(scene.environment, _pool_size(int(spp)), int(seed)))
+    seed = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)
+    outs, hit = _grid_impl(scene, groups, pool, seed, effects, int(spp))
     h, w = scene.camera.height, scene.camera.width
     images = jnp.zeros((n_r * n_c, h, w, 3), dtype)
     for members, out in zip(where, outs):

@@ -13,15 +13,22 @@ Each term is computed only if :func:`polyjax.render.plan_effects` says it exists
 - **direct_point** is closed form per pixel: one BRDF evaluation per light, no sampling.
 - **shadows**: ``V`` is a shadow ray against every object; otherwise ``V = 1`` exactly (a lone
   convex sphere or a plane cannot occlude itself; ``cos^+`` does its self-shadowing).
-- **environment**: Monte Carlo with ``spp`` samples importance-sampled from the map
-  (:class:`polyjax.render.EnvironmentLight`).
+- **environment**: Monte Carlo with ``spp`` samples per pixel, importance-sampled from the map
+  (:class:`polyjax.render.EnvironmentLight`): a pool of samples is drawn once per render
+  (:func:`polyjax.render.sample_pool`) and each pixel uses a hashed subset of it. With shadows,
+  ``sum_s c_s V_s`` is computed as ``sum_s c_s - sum_s c_s (1 - V_s)`` (same samples).
 - **indirect**: ``spp`` paths per pixel of ``max_bounces`` cosine-sampled bounces; at each
   secondary hit the direct terms above are added (the environment with one sample). Rays that
   leave the scene add nothing here (that light is the environment term).
 
+Each effect is its own compiled stage (primary rays, point lights, environment, occlusion,
+indirect, compositing), called only when the effect is on.
+
 ``force_all_effects=True`` computes every term whatever the scene (a black environment map when
 there is none, shadow rays, one indirect bounce at least); on a scene where the extra terms
-contribute nothing the pixels are identical, since they add exact zeros and multiply by exact ones.
+contribute nothing the pixels are identical: the shared terms come from the same compiled code
+(stages, and optimisation barriers around each BRDF term), and the extra terms add exact zeros
+or multiply by exact ones.
 """
 
 from __future__ import annotations
@@ -34,10 +41,10 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
 from ._brdf import evaluate_rgb
-from ._envmap import EnvironmentLight
+from ._envmap import EnvironmentLight, sample_pool
 from ._scene import DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
-_ENV_KEY, _INDIRECT_KEY = 1, 2
+_ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
 
 
 def cast_floats(tree, dtype):
@@ -64,6 +71,12 @@ class RenderResult(eqx.Module):
 # --------------------------------------------------------------------------- geometry
 
 
+def _dot(a, b):
+    """``a . b`` over the last axis of size 3, as explicit products and sums (a fixed evaluation
+    order, whatever XLA fuses it with)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def _eps(dtype) -> float:
     return 1e-4 if jnp.finfo(dtype).bits <= 32 else 1e-7
 
@@ -74,17 +87,17 @@ def _intersect(objects, o, d, tmin):
     for obj in objects:
         if isinstance(obj, Sphere):
             oc = o - obj.center
-            b = jnp.sum(oc * d, -1)
-            c = jnp.sum(oc * oc, -1) - obj.radius**2
+            b = _dot(oc, d)
+            c = _dot(oc, oc) - obj.radius**2
             disc = b * b - c
             sq = jnp.sqrt(jnp.maximum(disc, 0.0))
             t0, t1 = -b - sq, -b + sq
             t = jnp.where(t0 > tmin, t0, jnp.where(t1 > tmin, t1, jnp.inf))
             ts.append(jnp.where(disc >= 0, t, jnp.inf))
         else:
-            denom = jnp.sum(d * obj.normal, -1)
+            denom = _dot(d, obj.normal)
             safe = jnp.where(denom != 0, denom, 1.0)
-            t = (obj.offset - jnp.sum(o * obj.normal, -1)) / safe
+            t = (obj.offset - _dot(o, obj.normal)) / safe
             ts.append(jnp.where((denom != 0) & (t > tmin), t, jnp.inf))
     if len(ts) == 1:
         t = ts[0]
@@ -126,7 +139,7 @@ def _frame(objects, p, idx):
 
 def _to_local(frame, w):
     t, b, n = frame
-    return jnp.stack([jnp.sum(w * t, -1), jnp.sum(w * b, -1), jnp.sum(w * n, -1)], -1)
+    return jnp.stack([_dot(w, t), _dot(w, b), _dot(w, n)], -1)
 
 
 def _object_brdf(objects, idx):
@@ -147,65 +160,119 @@ def _visible(objects, p, n, l, dist):
     return (t >= dist - 2 * eps).astype(p.dtype)
 
 
-def _direct(brdf, p, frame, vl, point_lights, env, key, n_env, shadow_objects):
+_fence = jax.lax.optimization_barrier
+
+
+def _hash(x):
+    """A 32-bit integer mix (the "lowbias32" finaliser of C. Wellons): uint32 -> uint32."""
+    x = jnp.asarray(x, jnp.uint32)
+    x = x ^ (x >> 16)
+    x = x * jnp.uint32(0x7FEB352D)
+    x = x ^ (x >> 15)
+    x = x * jnp.uint32(0x846CA68B)
+    return x ^ (x >> 16)
+
+
+def _unit(h, dtype):
+    """A uint32 hash to a uniform number in ``[0, 1)`` (24 bits)."""
+    return (h >> 8).astype(dtype) * (1.0 / (1 << 24))
+
+
+def _pool_size(spp: int) -> int:
+    return max(1 << 14, 1 << int(np.ceil(np.log2(16 * spp))))
+
+
+def _pool_stride(n_pool: int) -> int:
+    return int(0.6180339887 * n_pool) | 1
+
+
+def _term(brdf, ul, vl, weight):
+    """``brdf(ul, vl) * weight``, fenced by optimisation barriers (see :func:`_direct`)."""
+    return _fence(brdf(ul, vl) * weight)
+
+
+def _direct(brdf, p, frame, vl, point_lights, pool, salt, pix, n_env, shadow_objects):
     """Direct lighting ``(N, 3)`` at points ``p`` (frame, local view ``vl``).
 
-    ``shadow_objects`` is None when no shadow ray is needed; ``env`` None when the environment
-    effect is off; ``n_env`` the environment samples per point.
+    ``shadow_objects`` is None when no shadow ray is needed; ``pool`` None when the environment
+    effect is off, else ``(directions, L / pdf)`` of :func:`sample_pool`; ``n_env`` the
+    environment samples per point: point ``i`` uses the pool entries
+    ``(hash(pix_i, salt) + s * stride) mod P`` for ``s < n_env`` (distinct since the stride is odd
+    and ``P`` a power of two).
+
+    Every light's term ``f(u, v) * weight`` is computed between optimisation barriers, from
+    inputs that also pass a barrier: XLA then cannot fuse or rewrite it differently depending on
+    what else the program computes (visibility, other effects). The term is the same code in
+    every program, and a render forced to compute every effect multiplies it by an exact 1 and
+    adds exact 0s where those effects contribute nothing, so its pixels are bit-identical.
     """
+    p, frame, vl = _fence((p, frame, vl))
     n = frame[2]
     acc = jnp.zeros(p.shape, p.dtype)
     for light in point_lights:
         if isinstance(light, DirectionalLight):
             l = jnp.broadcast_to(light.direction, p.shape)
-            e = light.irradiance
             dist = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
-            cos = jnp.maximum(jnp.sum(n * l, -1), 0.0)
-            weight = e * cos[..., None]
+            cos = jnp.maximum(_dot(n, l), 0.0)
+            weight = light.irradiance * cos[..., None]
         else:
             delta = light.position - p
-            d2 = jnp.sum(delta * delta, -1)
+            d2 = _dot(delta, delta)
             dist = jnp.sqrt(d2)
             l = delta / dist[..., None]
-            cos = jnp.maximum(jnp.sum(n * l, -1), 0.0)
+            cos = jnp.maximum(_dot(n, l), 0.0)
             weight = light.intensity * (cos / d2)[..., None]
-        c = brdf(_to_local(frame, l), vl) * weight
+        ul, l, weight, dist = _fence((_to_local(frame, l), l, weight, dist))
+        c = _term(brdf, ul, vl, weight)
         if shadow_objects is not None:
             c = c * _visible(shadow_objects, p, n, l, dist)[..., None]
         acc = acc + c
-    if env is not None:
-        inf = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
-
-        def one(s, a):
-            xi = jax.random.uniform(jax.random.fold_in(key, s), p.shape, p.dtype)
-            l, lp = env.sample(xi)
-            cos = jnp.maximum(jnp.sum(n * l, -1), 0.0)
-            c = brdf(_to_local(frame, l), vl) * (lp * cos[..., None])
-            if shadow_objects is not None:
-                c = c * _visible(shadow_objects, p, n, l, inf)[..., None]
-            return a + c
-
-        env_sum = jax.lax.fori_loop(0, n_env, one, jnp.zeros(p.shape, p.dtype)) if n_env > 1 else one(0, jnp.zeros(p.shape, p.dtype))
-        acc = acc + env_sum / n_env
+    if pool is not None:
+        acc = acc + _env_sum(brdf, p, frame, vl, pool, salt, pix, n_env, shadow_objects) / n_env
     return acc
 
 
-def _indirect(objects, p, frame, vl, idx, point_lights, env, key, spp, bounces, effects):
+def _env_sum(brdf, p, frame, vl, pool, salt, pix, n_env, shadow_objects, occluded_only=False):
+    """Sum over ``n_env`` pooled environment samples of ``f(u, v) L cos / pdf`` (times ``V`` when
+    ``shadow_objects`` is given; times ``1 - V`` when ``occluded_only``)."""
+    n = frame[2]
+    dirs, lps = pool
+    n_pool = dirs.shape[0]
+    inf = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
+    offset = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
+    stride = jnp.uint32(_pool_stride(n_pool))
+
+    def one(s, a):
+        k = ((offset + jnp.uint32(s) * stride) & jnp.uint32(n_pool - 1)).astype(jnp.int32)
+        l, lp = dirs[k], lps[k]
+        cos = jnp.maximum(_dot(n, l), 0.0)
+        ul, l, weight = _fence((_to_local(frame, l), l, lp * cos[..., None]))
+        c = _term(brdf, ul, vl, weight)
+        if shadow_objects is not None:
+            vis = _visible(shadow_objects, p, n, l, inf)
+            c = c * (1.0 - vis if occluded_only else vis)[..., None]
+        return a + c
+
+    zero = jnp.zeros(p.shape, p.dtype)
+    return jax.lax.fori_loop(0, n_env, one, zero) if n_env > 1 else one(0, zero)
+
+
+def _indirect(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounces, effects):
     """Mean over ``spp`` cosine-sampled paths of light arriving after ``1..bounces`` reflections."""
     eps = _eps(p.dtype)
     shadow_objects = objects if effects.shadows else None
+    base = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
 
     def path(s, acc):
-        k = jax.random.fold_in(key, s)
         pos, fr, v_loc, ix = p, frame, vl, idx
         throughput = jnp.ones(p.shape, p.dtype)
         alive = jnp.ones(p.shape[:-1], bool)
         for bounce in range(bounces):
-            kb = jax.random.fold_in(k, bounce)
-            xi = jax.random.uniform(jax.random.fold_in(kb, 0), p.shape[:-1] + (2,), p.dtype)
-            r = jnp.sqrt(xi[..., 0])
-            ph = 2 * jnp.pi * xi[..., 1]
-            loc = jnp.stack([r * jnp.cos(ph), r * jnp.sin(ph), jnp.sqrt(jnp.maximum(1 - xi[..., 0], 0.0))], -1)
+            h = _hash(base + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32((bounce * 0x632BE5AB) & 0xFFFFFFFF))
+            x0, x1 = _unit(h, p.dtype), _unit(_hash(h), p.dtype)
+            r = jnp.sqrt(x0)
+            ph = 2 * jnp.pi * x1
+            loc = jnp.stack([r * jnp.cos(ph), r * jnp.sin(ph), jnp.sqrt(jnp.maximum(1 - x0, 0.0))], -1)
             t_, b_, n_ = fr
             d = loc[..., :1] * t_ + loc[..., 1:2] * b_ + loc[..., 2:] * n_
             # cosine-weighted sampling: f cos / pdf = f pi
@@ -215,8 +282,8 @@ def _indirect(objects, p, frame, vl, idx, point_lights, env, key, spp, bounces, 
             p2 = pos + jnp.where(hit2, t2, 0.0)[..., None] * d
             fr2 = _frame(objects, p2, ix2)
             v2 = _to_local(fr2, -d)
-            l2 = _direct(_object_brdf(objects, ix2), p2, fr2, v2, point_lights, env, jax.random.fold_in(kb, 1), 1,
-                         shadow_objects)
+            l2 = _direct(_object_brdf(objects, ix2), p2, fr2, v2, point_lights, pool, _hash(h ^ jnp.uint32(7)), pix,
+                         1, shadow_objects)
             acc = acc + jnp.where(alive[..., None], throughput * l2, 0.0)
             pos, fr, v_loc, ix = p2, fr2, v2, ix2
         return acc
@@ -226,7 +293,8 @@ def _indirect(objects, p, frame, vl, idx, point_lights, env, key, spp, bounces, 
 
 
 @eqx.filter_jit
-def _render_impl(scene: Scene, env, key, effects: Effects, spp: int, bounces: int):
+def _primary(scene: Scene):
+    """Primary rays: hit points, shading frames, local view directions (one program for every mode)."""
     cam = scene.camera
     o, d = cam.rays()
     o, d = o.astype(scene.background.dtype), d.astype(scene.background.dtype)
@@ -235,18 +303,40 @@ def _render_impl(scene: Scene, env, key, effects: Effects, spp: int, bounces: in
     p = o + jnp.where(hit, t, 0.0)[..., None] * d
     frame = _frame(objects, p, idx)
     vl = _to_local(frame, -d)
-    brdf = _object_brdf(objects, idx)
-    point_lights = scene.point_lights if effects.direct_point else ()
-    shadow_objects = objects if effects.shadows else None
-    env_used = env if effects.environment else None
-    rad = _direct(brdf, p, frame, vl, point_lights, env_used, jax.random.fold_in(key, _ENV_KEY), spp, shadow_objects)
-    if effects.indirect:
-        rad = rad + _indirect(objects, p, frame, vl, idx, point_lights, env_used, jax.random.fold_in(key, _INDIRECT_KEY),
-                              spp, bounces, effects)
     scene_env = scene.environment
     background = scene_env.radiance(d) if scene_env is not None else jnp.broadcast_to(scene.background, d.shape)
-    img = jnp.where(hit[..., None], rad, background)
-    return img.reshape(cam.height, cam.width, 3), hit.reshape(cam.height, cam.width)
+    return dict(p=p, frame=frame, vl=vl, idx=idx, hit=hit, background=background)
+
+
+@eqx.filter_jit
+def _stage_point(scene: Scene, g, shadows: bool):
+    brdf = _object_brdf(scene.objects, g["idx"])
+    return _direct(brdf, g["p"], g["frame"], g["vl"], scene.point_lights, None, 0, None, 0,
+                   scene.objects if shadows else None)
+
+
+@eqx.filter_jit
+def _stage_env(scene: Scene, g, pool, seed, spp: int, occluded: bool):
+    brdf = _object_brdf(scene.objects, g["idx"])
+    pix = jnp.arange(g["p"].shape[0], dtype=jnp.uint32)
+    p, frame, vl = _fence((g["p"], g["frame"], g["vl"]))
+    total = _env_sum(brdf, p, frame, vl, pool, seed ^ jnp.uint32(_ENV_KEY), pix, spp,
+                     scene.objects if occluded else None, occluded_only=occluded)
+    return total / spp
+
+
+@eqx.filter_jit
+def _stage_indirect(scene: Scene, g, pool, seed, spp: int, bounces: int, effects: Effects):
+    pix = jnp.arange(g["p"].shape[0], dtype=jnp.uint32)
+    point_lights = scene.point_lights if effects.direct_point else ()
+    return _indirect(scene.objects, g["p"], g["frame"], g["vl"], g["idx"], pix, point_lights, pool,
+                     seed ^ jnp.uint32(_INDIRECT_KEY), spp, bounces, effects)
+
+
+@eqx.filter_jit
+def _stage_finish(g, rad, width: int, height: int):
+    img = jnp.where(g["hit"][..., None], rad, g["background"])
+    return img.reshape(height, width, 3), g["hit"].reshape(height, width)
 
 
 def _black_env(dtype):
@@ -273,12 +363,27 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
         raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
     effects = Effects.all() if force_all_effects else plan_effects(scene)
     scene = cast_floats(scene, dtype)
-    env = scene.environment
-    if effects.environment and env is None:
-        env = _black_env(dtype)
+    pool = None
+    if effects.environment:
+        env = scene.environment if scene.environment is not None else _black_env(dtype)
+        pool = tuple(jnp.asarray(a, dtype) for a in sample_pool(env, _pool_size(int(spp)), int(seed)))
     bounces = max(scene.max_bounces, 1) if effects.indirect else 0
     sampled = effects.environment or effects.indirect
-    img, hit = _render_impl(scene, env, jax.random.key(seed), effects, int(spp), bounces)
+    seed_arr = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)
+    g = _primary(scene)
+    if effects.direct_point and scene.point_lights:
+        rad = _stage_point(scene, g, effects.shadows)
+    else:
+        rad = jnp.zeros_like(g["p"])
+    if effects.environment:
+        # the unshadowed environment term is one program whatever else is on; shadowed samples are
+        # then removed by a separate estimate of the occluded part (the same samples, times 1 - V)
+        rad = rad + _stage_env(scene, g, pool, seed_arr, int(spp), False)
+        if effects.shadows:
+            rad = rad - _stage_env(scene, g, pool, seed_arr, int(spp), True)
+    if effects.indirect:
+        rad = rad + _stage_indirect(scene, g, pool, seed_arr, int(spp), bounces, effects)
+    img, hit = _stage_finish(g, rad, scene.camera.width, scene.camera.height)
     return RenderResult(img, hit, effects, int(spp) if sampled else 0)
 
 
