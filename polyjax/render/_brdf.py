@@ -155,7 +155,7 @@ class TabulatedBRDF(eqx.Module):
     Interpolation is inverse-distance weighting over the ``k`` nearest samples,
     ``f(u, v) = sum_j w_j b_j / sum_j w_j`` with ``w_j = 1 / (d_j^2 + eps)``, in a *reciprocal*
     parametrisation: every sample also counts at its swapped position ``(v_i, u_i)``, so
-    ``f(u, v) = f(v, u)`` exactly. Distances are between feature vectors:
+    ``f(u, v) = f(v, u)`` (up to rounding). Distances are between feature vectors:
 
     - ``isotropic=False``: ``(u, v)`` in R^6 (``d^2 = |u - u_i|^2 + |v - v_i|^2``);
     - ``isotropic=True``: the rotation-invariant ``(cos theta_u, cos theta_v, u . v)``, so a
