@@ -391,7 +391,11 @@ def _zernike_kernel(u, v, y, wl, wc2, *, order):
     no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
     code = jnp.where(no_samples, BaselineStatus.NO_SAMPLES, BaselineStatus.OK).astype(jnp.int32)
     coef = jnp.where(no_samples[:, None], 0.0, coef)
-    return coef, l2, code
+    zero = jnp.zeros(code.shape, jnp.int32)
+    return dict(
+        params=coef, raw=coef, l2=l2, status=code, steps=zero, success=code == BaselineStatus.OK, start_l2=l2[:, None],
+        start_status=code[:, None], best_start=zero,
+    )
 
 
 def fit(
@@ -452,14 +456,8 @@ def fit(
     if model.linear:
         if not isinstance(order, (int, np.integer)) or order < 0:
             raise InputError(f"order: expected a non-negative integer, found {order!r}")
-        coef, l2, code = _zernike_kernel(u, v, y, wl, wc2, order=int(order))
-        zero = jnp.zeros(batch, jnp.int32)
-        return BaselineFit(
-            params=coef.reshape(batch + coef.shape[-1:]), raw=coef.reshape(batch + coef.shape[-1:]),
-            l2=l2.reshape(batch), status=code.reshape(batch), steps=zero, success=(code == 0).reshape(batch),
-            start_l2=l2.reshape(batch + (1,)), start_status=code.reshape(batch + (1,)), best_start=zero,
-            name=model.name, backend="lstsq",
-        )
+        out = _zernike_kernel(u, v, y, wl, wc2, order=int(order))
+        return BaselineFit(**{k: a.reshape(batch + a.shape[1:]) for k, a in out.items()}, name=model.name, backend="lstsq")
     if not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
         raise InputError(f"max_steps: expected a positive integer, found {max_steps!r}")
     raw0 = None

@@ -111,7 +111,7 @@ def test_bad_input():
 def test_curet_no_worse_than_scipy_and_backends_agree():
     data = pj.data.load_curet(samples=[1, 25, 55])  # Felt, Quarry Tile, Orange Peel
     key = jax.random.PRNGKey(0)
-    for name in ("cook-torrance", "lafortune"):
+    for name in ("lafortune",):  # every model x 52 samples: benchmarks/bench_baselines.py
         fit = bl.fit(name, data, n_starts=8, key=key)
         starts = bl.initial_guesses(name, data, n_starts=8, key=key)
         ref = scipy_best_l2(name, data.u, data.v, data.values, starts)
