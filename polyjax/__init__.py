@@ -8,6 +8,7 @@ for fitting; polyjax does not change global JAX settings on import.
 """
 
 from . import data
+from . import render
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._config import DATA_ENV, data_root, has_data_root
