@@ -58,8 +58,13 @@ def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, 
     x = get_variables(variables).fn(u, v)
     k = x.shape[-1]
     dtype = values.dtype
-    mask = mask & jnp.isfinite(values)
-    values = jnp.where(mask, values, 0.0)
+    finite = jnp.isfinite(values)
+    if shared:  # one mask for every lane: a lane with NaN/inf cannot be masked alone, it is flagged
+        lane_bad = ~jnp.all(finite, axis=-1)
+    else:
+        mask = mask & finite
+        lane_bad = jnp.zeros(values.shape[:1], bool)
+    values = jnp.where(finite, values, 0.0)
     w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)  # (B or 1, n)
     tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
@@ -98,10 +103,14 @@ def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, 
         bc = lambda a: jnp.broadcast_to(a[None], (n_deg,) + a.shape)  # noqa: E731
         out_pca = (bc(pca.mean), bc(pca.rotation), bc(centre), bc(hw))
         n_used = jnp.broadcast_to(n_used[None], (n_deg,) + n_used.shape)
+    bad = jnp.broadcast_to(lane_bad[None, :], (n_deg, values.shape[0]))
     status = jnp.where(
-        n_used == 0, FitStatus.NO_SAMPLES, jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)
+        bad, FitStatus.NONFINITE_VALUES,
+        jnp.where(n_used == 0, FitStatus.NO_SAMPLES, jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)),
     ).astype(jnp.int32)
-    coef = jnp.where((n_used == 0)[..., None], 0.0, coef)
+    failed = bad | (n_used == 0)
+    coef = jnp.where(failed[..., None], 0.0, coef)
+    l2 = jnp.where(failed, jnp.inf, l2)
     degs = jnp.broadcast_to(degrees[:, None], status.shape)
     return dict(
         coefficients=coef.astype(dtype), degree=degs.astype(jnp.int32), mean=out_pca[0], rotation=out_pca[1],
@@ -236,16 +245,24 @@ def fit_polynomial(
 
     nb = int(np.prod(batch)) if batch else 1
     values2 = values.reshape(nb, n)
-    m2 = m.reshape(nb, n) & jnp.isfinite(values2)
     w2 = w.reshape(-1, n)
-    shared = False
-    if concrete:
-        m_np = np.asarray(m2)
-        w_np = np.asarray(w2)
-        if _rows_equal(m_np) and _rows_equal(w_np):
+    if mask is None and w2.shape[0] == 1 and (nonfinite == "error" or concrete):
+        # one set of samples for every lane: one design, one factorisation, nb right-hand sides
+        shared = True
+        m2 = dir_ok[None, :]
+    else:
+        m2 = m.reshape(nb, n)
+        if nonfinite == "mask":
+            m2 = m2 & jnp.isfinite(values2)
+        shared = False
+        if concrete and _rows_equal(np.asarray(m2)) and _rows_equal(np.asarray(w2)):
             shared = True
             m2, w2 = m2[:1], w2[:1]
     if not shared:
+        w2 = jnp.broadcast_to(w2, (nb, n))
+    if shared and concrete and nonfinite == "mask" and not bool(jnp.all(jnp.isfinite(values2))):
+        shared = False
+        m2 = jnp.broadcast_to(m2, (nb, n)) & jnp.isfinite(values2)
         w2 = jnp.broadcast_to(w2, (nb, n))
 
     out = _fit_kernel(

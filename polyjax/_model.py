@@ -23,6 +23,9 @@ class FitStatus(enum.IntEnum):
     RANK_DEFICIENT = 1
     #: no sample survived the cutoff and masks; coefficients are 0 and L2 is inf
     NO_SAMPLES = 2
+    #: NaN/inf among the values of a lane fitted under an outer ``jit`` (where no Python error can be
+    #: raised); coefficients are 0 and L2 is inf. Concrete calls raise :class:`InputError` instead.
+    NONFINITE_VALUES = 3
 
 
 class PolynomialBRDF(eqx.Module):
