@@ -5,7 +5,9 @@ Minimises :math:`\sum_i w_i (y_i - D_i \beta)^2` without forming the normal equa
 
 1. ``A = diag(sqrt(w)) D``, columns equilibrated to unit norm;
 2. Householder QR of the augmented matrix ``[A | sqrt(w) Y]`` (``R`` only, ``Q`` never formed),
-   which yields ``R`` and ``Q^T sqrt(w) Y`` in one pass over the data;
+   which yields ``R`` and ``Q^T sqrt(w) Y`` in one pass over the data; for very tall designs
+   (MERL: a million rows) CholeskyQR2 gives the same ``R`` and ``Q^T sqrt(w) Y`` with two matrix
+   products (:mod:`polyjax._linalg`), falling back to Householder if the Cholesky factor fails;
 3. SVD of the small ``m x m`` triangle ``R = U S V^T``, giving the rank, the 2-norm condition
    number ``s_max / s_min`` and the minimum-norm solution ``beta = V S^+ U^T Q^T sqrt(w) y``.
 
@@ -20,7 +22,12 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from ._linalg import qr_r, svd, tall_qr
+
 METHODS = ("qr", "svd")
+#: designs with at least this many rows (and 8 times more rows than columns) take the Gram-based
+#: CholeskyQR2 path of :func:`polyjax._linalg.tall_qr` (one matrix product instead of ``m`` passes).
+TALL_ROWS = 20_000
 
 
 class LstsqSolution(eqx.Module):
@@ -79,18 +86,22 @@ def weighted_lstsq(
     scale = jnp.where(scale > 0, scale, 1.0)
     a = a / scale
     b = y2 * sw[:, None]
-    if method == "qr":
+    if method == "qr" and n >= TALL_ROWS and n >= 8 * (m + r):
+        rr, qtb = tall_qr(a, b, act)
+        uu, s, vt = svd(rr)
+        utb = uu.T @ qtb
+    elif method == "qr":
         aug = jnp.concatenate([a, b], axis=1)
         rows = m + r
         if n < rows:  # zero rows leave the problem unchanged and give a square enough R
             aug = jnp.concatenate([aug, jnp.zeros((rows - n, rows), dtype)], axis=0)
-        raug = jnp.linalg.qr(aug, mode="r")
+        raug = qr_r(aug)
         rr = raug[:m, :m]
         qtb = raug[:m, m:]
-        uu, s, vt = jnp.linalg.svd(rr)
+        uu, s, vt = svd(rr)
         utb = uu.T @ qtb
     else:
-        uu, s, vt = jnp.linalg.svd(a, full_matrices=False)
+        uu, s, vt = svd(a)
         utb = uu.T @ b
     eps = jnp.finfo(dtype).eps
     tol = (eps * max(n, m) if rcond is None else rcond) * s[0]

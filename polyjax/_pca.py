@@ -12,6 +12,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._linalg import eigh
+
 
 class PCA(eqx.Module):
     """A fitted principal-component transform.
@@ -47,7 +49,7 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
     mean = jnp.sum(m[:, None] * x, axis=0) / jnp.maximum(cnt, 1.0)
     xc = (x - mean) * m[:, None]
     cov = (xc.T @ xc) / jnp.maximum(cnt - 1.0, 1.0)
-    evals, evecs = jnp.linalg.eigh(cov)
+    evals, evecs = eigh(cov)
     evals = evals[::-1]
     evecs = evecs[:, ::-1]
     idx = jnp.argmax(jnp.abs(evecs), axis=0)
