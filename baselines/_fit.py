@@ -35,7 +35,7 @@ import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from polyjax import InputError, Measurements, fit_weights, l2_error, safe_normalize, weighted_lstsq
+from polyjax import InputError, Measurements, check_samples, fit_weights, l2_error, safe_normalize, weighted_lstsq
 
 from ._common import BaselineModel
 from ._registry import get_model
@@ -141,16 +141,7 @@ def _prepare(u, v, values, weights, mask, cutoff_deg):
     dtype = jnp.result_type(float)
     uu = np.asarray(u, dtype=float)
     vv = np.asarray(v, dtype=float)
-    for nm, w in (("u", uu), ("v", vv)):
-        if w.ndim != 2 or w.shape[-1] != 3:
-            raise InputError(f"{nm}: expected directions of shape (n, 3), found {w.shape}")
-        if not np.all(np.isfinite(w)):
-            raise InputError(f"{nm}: expected finite direction vectors, found NaN or inf")
-    if uu.shape != vv.shape:
-        raise InputError(f"u and v: expected the same shape (n, 3), found {uu.shape} and {vv.shape}")
-    n = uu.shape[0]
-    if values.ndim < 1 or values.shape[-1] != n:
-        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
+    n = check_samples(uu, vv, values)
     batch = values.shape[:-1]
     m = np.ones(values.shape, bool) if mask is None else np.broadcast_to(np.asarray(mask, bool), values.shape)
     bad = m & ~np.isfinite(values)

@@ -14,7 +14,7 @@ from ._basis import BASES, design_matrix, n_terms, term_degrees
 from ._errors import FitError, InputError
 from ._geometry import safe_normalize
 from ._lstsq import METHODS, weighted_lstsq
-from ._measurements import Measurements
+from ._measurements import Measurements, check_samples
 from ._metrics import fit_weights
 from ._model import FitStatus, PolynomialBRDF
 from ._pca import fit_pca
@@ -209,21 +209,9 @@ def fit_polynomial(
     dtype = values.dtype
     u = jnp.asarray(u, dtype)
     v = jnp.asarray(v, dtype)
-    for name, w in (("u", u), ("v", v)):
-        if w.ndim != 2 or w.shape[-1] != 3:
-            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
-    if u.shape != v.shape:
-        raise InputError(f"u and v: expected the same shape (n, 3), found {u.shape} and {v.shape}")
-    n = u.shape[0]
-    if values.ndim < 1 or values.shape[-1] != n:
-        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
     batch = values.shape[:-1]
     concrete = not any(_is_tracer(a) for a in (u, v, values, weights, mask))
-
-    if concrete:
-        for name, w in (("u", u), ("v", v)):
-            if not bool(jnp.all(jnp.isfinite(w))):
-                raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
+    n = check_samples(u, v, values, concrete=not (_is_tracer(u) or _is_tracer(v)))
     u, ok_u = safe_normalize(u)
     v, ok_v = safe_normalize(v)
     dir_ok = ok_u & ok_v

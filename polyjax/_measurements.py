@@ -84,6 +84,28 @@ class Measurements(eqx.Module):
         return float(jnp.mean(self.mask))
 
 
+def check_samples(u, v, values, *, concrete: bool = True) -> int:
+    """Check the shapes shared by every fitter: ``u``, ``v`` ``(n, 3)``, ``values`` ``(..., n)``.
+
+    With ``concrete`` (arrays, not tracers) the directions must also be finite. Raises
+    :class:`InputError` naming the argument, what was expected and what was found.
+
+    Returns:
+        ``n``, the number of samples.
+    """
+    for name, w in (("u", u), ("v", v)):
+        if w.ndim != 2 or w.shape[-1] != 3:
+            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
+        if concrete and not np.all(np.isfinite(np.asarray(w))):
+            raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
+    if u.shape != v.shape:
+        raise InputError(f"u and v: expected the same shape (n, 3), found {u.shape} and {v.shape}")
+    n = u.shape[0]
+    if values.ndim < 1 or values.shape[-1] != n:
+        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
+    return n
+
+
 def make_measurements(
     u, v, values, *, weights=None, mask=None, names=(), ids=(), channels=(), axes=(), source="",
     dtype=None,
@@ -99,14 +121,10 @@ def make_measurements(
     u = np.asarray(u, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
     values = np.asarray(values, dtype=np.float64)
+    n = check_samples(u, v, values)
     for name, w in (("u", u), ("v", v)):
-        if w.ndim != 2 or w.shape[1] != 3:
-            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
-    if u.shape != v.shape:
-        raise InputError(f"u and v: expected the same shape, found {u.shape} and {v.shape}")
-    n = u.shape[0]
-    if values.ndim < 1 or values.shape[-1] != n:
-        raise InputError(f"values: expected shape (..., {n}) matching u, found {values.shape}")
+        if np.any(np.linalg.norm(w, axis=-1) == 0):
+            raise InputError(f"{name}: expected non-zero direction vectors, found a zero vector")
     finite = np.isfinite(values)
     m = finite if mask is None else (np.asarray(mask, dtype=bool) & finite)
     m = np.broadcast_to(m, values.shape).copy()
