@@ -165,7 +165,7 @@ def fit_polynomial(
            both span the same space and give the same fit.
         interactions: fit the full response surface of equation (2) instead of equation (3).
         method: ``"qr"`` (default) or ``"svd"``.
-        rcond: relative singular-value cutoff for the rank; default ``eps * max(n, m)``.
+        rcond: relative singular-value cutoff for the rank; default ``eps * max(m, sqrt(n))``.
         rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
            (raise :class:`polyjax.FitError`). Lanes with no samples are always flagged ``NO_SAMPLES``
            (L2 = inf) and raise under ``"error"``.

@@ -66,7 +66,10 @@ def weighted_lstsq(
         weights: ``(n,)`` non-negative weights on the squared residuals (0 drops a sample).
         active: ``(m,)`` bool, columns to use (others get coefficient 0); all when None.
         method: ``"qr"`` (QR, then SVD of ``R``) or ``"svd"`` (SVD of the weighted design).
-        rcond: singular values below ``rcond * s_max`` count as zero; default ``eps * max(n, m)``.
+        rcond: singular values below ``rcond * s_max`` count as zero; default ``eps * max(m, sqrt(n))``.
+            An exactly dependent column leaves ``s_min / s_max`` at about ``eps`` whatever ``n``; the
+            ``eps * max(n, m)`` of ``numpy.linalg.lstsq`` would call a float32 MERL design (``n`` ~ 1e6,
+            condition number ~40) rank-deficient (``docs/robustness.md``).
 
     Returns:
         :class:`LstsqSolution`, minimum-norm when the design is rank-deficient. Traceable:
@@ -104,7 +107,7 @@ def weighted_lstsq(
         uu, s, vt = svd(a)
         utb = uu.T @ b
     eps = jnp.finfo(dtype).eps
-    tol = (eps * max(n, m) if rcond is None else rcond) * s[0]
+    tol = (eps * max(m, n**0.5) if rcond is None else rcond) * s[0]
     nonzero = s > tol
     coef = vt.T @ (jnp.where(nonzero, 1.0 / jnp.where(nonzero, s, 1.0), 0.0)[:, None] * utb)
     coef = coef / scale[:, None] * act[:, None]
