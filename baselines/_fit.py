@@ -102,7 +102,11 @@ class BaselineFit(eqx.Module):
         return tuple(self.l2.shape)
 
     def __call__(self, u, v) -> Float[Array, "*batch n"]:
-        """Evaluate every fitted lane at directions ``u, v`` ``(n, 3)``: returns ``(*batch, n)``."""
+        """Evaluate every fitted lane at directions ``u, v`` ``(n, 3)``: returns ``(*batch, n)``.
+
+        Directions are renormalised, as :func:`fit` does with its inputs (so a non-unit ``u`` gives
+        the same value as ``u / |u|``); a zero vector has no direction and gives 0.
+        """
         u = jnp.asarray(u, self.params.dtype)
         v = jnp.asarray(v, self.params.dtype)
         if u.ndim != 2 or u.shape[-1] != 3 or u.shape != v.shape:
@@ -113,8 +117,10 @@ class BaselineFit(eqx.Module):
 @functools.partial(jax.jit, static_argnames=("name",))
 def _evaluate_batch(name, params, u, v):
     model = get_model(name)
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
     flat = params.reshape(-1, params.shape[-1])
-    out = jax.vmap(lambda p: model.evaluate(p, u, v))(flat)
+    out = jax.vmap(lambda p: jnp.where(ok_u & ok_v, model.evaluate(p, u, v), 0.0))(flat)
     return out.reshape(params.shape[:-1] + (u.shape[0],))
 
 
