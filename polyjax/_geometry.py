@@ -70,13 +70,18 @@ def cutoff_mask(u: ArrayLike, v: ArrayLike, cutoff_deg: float | None = 80.0) -> 
     """Samples kept by the Ngan et al. rule: both ``theta_u`` and ``theta_v`` at most ``cutoff_deg``.
 
     Directions below the horizon (``cos theta <= 0``) are always dropped. ``cutoff_deg=None``
-    keeps every sample above the horizon.
+    keeps every sample above the horizon. A sample exactly at the cutoff is kept: the comparison
+    ``cos theta >= cos(cutoff) - tol`` uses ``tol = max(1e-9, 4 eps)`` of the directions' dtype, so
+    float32 and float64 keep the same samples (MERL's grid has bins at exactly 80 degrees).
     """
     cu = cos_theta(u)
     cv = cos_theta(v)
     keep = (cu > 0) & (cv > 0)
     if cutoff_deg is not None:
-        c = jnp.cos(jnp.deg2rad(jnp.asarray(cutoff_deg, dtype=jnp.result_type(cu))))
-        # a tiny tolerance so that samples measured exactly at the cutoff angle are kept
-        keep = keep & (cu >= c - 1e-9) & (cv >= c - 1e-9)
+        dtype = jnp.result_type(cu)
+        c = jnp.cos(jnp.deg2rad(jnp.asarray(cutoff_deg, dtype=dtype)))
+        # a tolerance so that samples measured exactly at the cutoff angle are kept: 1e-9, or a few
+        # units in the last place when the precision is coarser (float32), so both precisions agree
+        tol = max(1e-9, 4 * float(jnp.finfo(dtype).eps)) if jnp.issubdtype(dtype, jnp.floating) else 1e-9
+        keep = keep & (cu >= c - tol) & (cv >= c - tol)
     return keep
