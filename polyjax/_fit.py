@@ -26,24 +26,32 @@ def _is_tracer(x) -> bool:
 
 
 def _design_for(x, keep, max_degree, basis, interactions):
-    """PCA of the kept samples, affine scaling, and the design matrix (equation (13))."""
+    """PCA of the kept samples, affine scaling, and the design matrix (equation (13)).
+
+    A component whose range over the kept samples is within rounding of ``x`` (``1e3 eps max|x|``;
+    e.g. Lafortune's ``X_1 + X_2 = 1`` when every sample has ``u = v``) carries no information,
+    only rounding noise that column equilibration would blow up into huge coefficients. Its
+    half-width is set to ``inf``: ``t = 0`` here and wherever the model is evaluated, so its
+    columns are constants and the fit is flagged rank-deficient (minimum-norm solution).
+    """
     pca = fit_pca(x, keep)
     z = pca(x)
     k = x.shape[-1]
+    big = jnp.finfo(x.dtype).max
+    lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
+    hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
+    any_kept = jnp.any(keep)
+    lo = jnp.where(any_kept, lo, -1.0)
+    hi = jnp.where(any_kept, hi, 1.0)
+    hw = 0.5 * (hi - lo)
+    x_mag = jnp.max(jnp.where(keep[:, None], jnp.abs(x), 0.0))
+    flat = ~(hw > 1e3 * jnp.finfo(x.dtype).eps * x_mag)
     if basis == "legendre":
-        big = jnp.finfo(x.dtype).max
-        lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
-        hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
-        any_kept = jnp.any(keep)
-        lo = jnp.where(any_kept, lo, -1.0)
-        hi = jnp.where(any_kept, hi, 1.0)
         centre = 0.5 * (lo + hi)
-        hw = 0.5 * (hi - lo)
-        tiny = 1e3 * jnp.finfo(x.dtype).eps * jnp.maximum(1.0, jnp.abs(centre))
-        hw = jnp.where(hw > tiny, hw, 1.0)  # a constant component: its column duplicates the intercept
     else:
         centre = jnp.zeros((k,), x.dtype)
         hw = jnp.ones((k,), x.dtype)
+    hw = jnp.where(flat, jnp.inf, hw)
     d = design_matrix((z - centre) / hw, max_degree, basis, interactions)
     return pca, centre, hw, d
 

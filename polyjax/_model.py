@@ -41,7 +41,8 @@ class PolynomialBRDF(eqx.Module):
         coefficients: ``(*batch, m)`` basis coefficients, ``m = k * max_degree + 1`` (0 beyond a lane's degree).
         degree: ``(*batch,)`` the degree ``p`` of each lane.
         mean, rotation: PCA transform, ``(*batch, k)`` and ``(*batch, k, k)``.
-        centre, halfwidth: affine map of each component onto ``[-1, 1]`` (0 and 1 for monomials).
+        centre, halfwidth: affine map of each component onto ``[-1, 1]`` (0 and 1 for monomials); a
+            half-width of ``inf`` marks a component that was constant over the fitted samples (``t = 0``).
         l2: ``(*batch,)`` L2 error (equation (11)) on the fitted data.
         rank, condition: numerical rank and condition number of the weighted design.
         n_used: samples that entered the fit.
