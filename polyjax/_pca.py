@@ -3,7 +3,10 @@
 Convention: covariance PCA, centred and unweighted, over the samples used in the fit (a 0/1
 mask). ``Z = (X - mean) @ rotation``; the columns of ``rotation`` are the eigenvectors of the
 covariance sorted by decreasing variance, each signed so that its entry of largest magnitude
-is positive (so runs and machines agree).
+is positive (so runs and machines agree). Entries within ``sqrt(eps)`` of the largest magnitude
+count as tied and the first of them decides: symmetric data (e.g. samples closed under swapping
+``x`` and ``y``) give eigenvectors like ``(a, -a, b)`` whose two largest entries differ only by
+rounding, and a plain ``argmax`` then flipped the sign with the order of the samples.
 """
 
 from __future__ import annotations
@@ -52,7 +55,9 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
     evals, evecs = eigh(cov)
     evals = evals[::-1]
     evecs = evecs[:, ::-1]
-    idx = jnp.argmax(jnp.abs(evecs), axis=0)
+    mag = jnp.abs(evecs)
+    tied = mag >= jnp.max(mag, axis=0, keepdims=True) - jnp.sqrt(jnp.finfo(x.dtype).eps)
+    idx = jnp.argmax(tied, axis=0)  # the first (near-)largest entry of each column
     sign = jnp.sign(evecs[idx, jnp.arange(k)])
     sign = jnp.where(sign == 0, 1.0, sign)
     evecs = evecs * sign[None, :]
