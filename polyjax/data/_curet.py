@@ -112,7 +112,7 @@ def load_curet(
 
     Returns:
         :class:`Measurements` with ``u, v`` ``(205, 3)``, ``values`` ``(n_samples, 205)`` (RGB average, 1/sr),
-        weights 1, axes ``("material",)``. The 43 slightly negative values are kept.
+        weights 1, axes ``("material",)``. The 29 slightly negative values (and 14 zeros) are kept.
     """
     u, v = read_curet_geometry(root)
     names = curet_sample_names(root)
