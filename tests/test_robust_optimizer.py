@@ -1,0 +1,62 @@
+"""Hard case: optimiser trouble in the baselines. Starts that overflow to NaN/inf loss, starts on the
+parameter bounds, far starts, step limits: reported through BaselineStatus, never selected when
+non-finite, and parameters never NaN."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import baselines as bl
+
+from _baseline_problems import TRUE_PARAMS, synthetic_geometry
+
+NAME = "cook-torrance"
+
+
+@pytest.fixture(scope="module")
+def problem():
+    u, v = synthetic_geometry(150, seed=4)
+    m = bl.get_model(NAME)
+    return u, v, m.evaluate(jnp.asarray(TRUE_PARAMS[NAME]), u, v), m
+
+
+def test_best_of_starts_never_picks_a_nan_or_inf_start(problem):
+    """Starts at raw 1e200 / 1e154 overflow (rho = raw^2 = inf): loss NaN/inf, flagged NONFINITE, not chosen,
+    even when listed first and with a worse finite start beside them."""
+    u, v, y, m = problem
+    good = m.to_raw(jnp.asarray(TRUE_PARAMS[NAME])) + 0.3
+    starts = jnp.stack([jnp.full((4,), 1e200), good, jnp.array([1e154, 1e154, 0.5, 0.5])])
+    f = bl.fit(NAME, u, v, y, starts=starts, max_steps=60, refine=None)
+    sl2, ss = np.asarray(f.start_l2), np.asarray(f.start_status)
+    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == bl.BaselineStatus.NONFINITE)
+    assert int(f.best_start) == 1 and bool(f.success) and float(f.l2) < 1e-8
+    np.testing.assert_allclose(np.asarray(f.params), TRUE_PARAMS[NAME], rtol=1e-5)
+
+
+def test_every_start_nonfinite_reported_and_parameters_not_nan(problem):
+    u, v, y, _ = problem
+    f = bl.fit(NAME, u, v, y, starts=jnp.full((1, 4), 1e200), max_steps=20, refine=None)
+    assert int(f.status) == bl.BaselineStatus.NONFINITE and not bool(f.success)
+    assert not np.any(np.isnan(np.asarray(f.params))) and np.isinf(float(f.l2))
+
+
+def test_start_exactly_on_the_bounds_stalls_and_multistart_recovers(problem):
+    """raw = 0 puts rho_d = rho_s = 0 and m at its lower bound, where every transform's derivative
+    vanishes: a stationary point. LM stops there (poor L2); with the generated starts added the
+    fit recovers the true parameters."""
+    u, v, y, m = problem
+    edge = jnp.zeros((1, 4))
+    f = bl.fit(NAME, u, v, y, starts=edge, max_steps=60, refine=None)
+    assert np.isfinite(float(f.l2)) and float(f.l2) > 0.1
+    gen = bl.initial_guesses(NAME, u, v, y, n_starts=4)
+    g = bl.fit(NAME, u, v, y, starts=jnp.concatenate([edge, gen], axis=0), max_steps=60, refine=None)
+    assert int(g.best_start) != 0 and float(g.l2) < 1e-8
+
+
+def test_far_start_and_step_limit_reported_as_max_steps(problem):
+    """A start 1e6 times too bright with three steps: MAX_STEPS, success False, finite parameters and L2."""
+    u, v, y, m = problem
+    far = m.to_raw(jnp.array([1e5, 1e5, 2.9, 0.999]))[None]
+    f = bl.fit(NAME, u, v, y, starts=far, max_steps=3, refine=None)
+    assert int(f.status) == bl.BaselineStatus.MAX_STEPS and not bool(f.success)
+    assert np.all(np.isfinite(np.asarray(f.params))) and np.isfinite(float(f.l2))
