@@ -58,10 +58,12 @@ def _design_for(x, keep, max_degree, basis, interactions):
 
 @functools.partial(
     jax.jit,
-    static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "shared"),
+    static_argnames=(
+        "variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "shared", "flag_nonfinite",
+    ),
 )
 def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, basis, interactions, method, rcond,
-                cutoff_deg, shared):
+                cutoff_deg, shared, flag_nonfinite=True):
     """values (B, n); weights, mask (B or 1, n); degrees (D,) -> dict of (D, B, ...) arrays."""
     x = get_variables(variables).fn(u, v)
     k = x.shape[-1]
@@ -69,9 +71,9 @@ def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, 
     finite = jnp.isfinite(values)
     if shared:  # one mask for every lane: a lane with NaN/inf cannot be masked alone, it is flagged
         lane_bad = ~jnp.all(finite, axis=-1)
-    else:
+    else:  # nonfinite="error" under an outer jit flags the lane whatever the mask; "mask" drops the samples
+        lane_bad = ~jnp.all(finite, axis=-1) & flag_nonfinite
         mask = mask & finite
-        lane_bad = jnp.zeros(values.shape[:1], bool)
     values = jnp.where(finite, values, 0.0)
     w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)  # (B or 1, n)
     tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
@@ -177,7 +179,9 @@ def fit_polynomial(
         rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
            (raise :class:`polyjax.FitError`). Lanes with no samples are always flagged ``NO_SAMPLES``
            (L2 = inf) and raise under ``"error"``.
-        nonfinite: ``"error"`` (raise on NaN/inf in ``values``) or ``"mask"`` (drop those samples).
+        nonfinite: ``"error"`` (raise on NaN/inf in ``values``; under an outer ``jit``, where nothing can be
+           raised, such a lane is flagged ``NONFINITE_VALUES`` with or without ``mask``) or ``"mask"``
+           (drop those samples).
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
@@ -264,7 +268,7 @@ def fit_polynomial(
     out = _fit_kernel(
         u, v, values2, w2, m2, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
         interactions=bool(interactions), method=method, rcond=rcond,
-        cutoff_deg=None if cutoff_deg is None else float(cutoff_deg), shared=shared,
+        cutoff_deg=None if cutoff_deg is None else float(cutoff_deg), shared=shared, flag_nonfinite=nonfinite == "error",
     )
     lead = (degrees.size,) if not scalar_degree else ()
 
