@@ -33,15 +33,21 @@ def cartesian_to_spherical(w: ArrayLike) -> tuple[Float[Array, "..."], Float[Arr
 def safe_normalize(w: ArrayLike) -> tuple[Float[Array, "... 3"], Bool[Array, "..."]]:
     """Normalise vectors; zero (or non-finite) vectors become ``+z`` and are reported invalid.
 
+    Vectors shorter than ``1e-12`` count as having no direction. The length is computed after
+    dividing by the largest component, so vectors of any finite length (``1e200``, or ``1e30``
+    in float32, whose squared length overflows) are normalised too.
+
     Returns:
         ``(unit, valid)``: unit vectors and a mask that is False where the input had no direction.
     """
     w = jnp.asarray(w)
-    sq = jnp.sum(w * w, axis=-1, keepdims=True)
-    valid = (sq[..., 0] > _EPS**2) & jnp.all(jnp.isfinite(w), axis=-1)
-    safe_sq = jnp.where(valid[..., None], sq, 1.0)
+    finite = jnp.all(jnp.isfinite(w), axis=-1)
+    big = jnp.max(jnp.abs(jnp.where(finite[..., None], w, 0.0)), axis=-1, keepdims=True)
+    scaled = jnp.where(big > 0, w / jnp.where(big > 0, big, 1.0), 0.0)
+    norm = jnp.sqrt(jnp.sum(scaled * scaled, axis=-1, keepdims=True))  # in [1, sqrt(3)] where big > 0
+    valid = finite & (big[..., 0] * norm[..., 0] > _EPS)
     z = jnp.zeros_like(w).at[..., 2].set(1.0)
-    unit = jnp.where(valid[..., None], jnp.where(valid[..., None], w, z) / jnp.sqrt(safe_sq), z)
+    unit = jnp.where(valid[..., None], scaled / jnp.where(valid[..., None], norm, 1.0), z)
     return unit, valid
 
 
