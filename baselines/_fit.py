@@ -142,6 +142,8 @@ def _prepare(u, v, values, weights, mask, cutoff_deg):
     if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
         raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
     values = np.asarray(values)
+    if np.issubdtype(values.dtype, np.complexfloating):
+        raise InputError(f"values: expected real BRDF values, found dtype {values.dtype}")
     if not np.issubdtype(values.dtype, np.floating):
         values = values.astype(float)
     dtype = jnp.result_type(float)

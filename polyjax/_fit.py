@@ -165,6 +165,8 @@ def fit_polynomial(
         v: ``(n, 3)`` view directions.
         values: ``(*batch, n)`` measured BRDF, samples last; every leading axis (materials, channels)
            is fitted independently in the same call.
+           The fit runs in the dtype of ``values`` (float32 or float64; integers are converted to the
+           default float, float16/bfloat16 to float32; complex values are rejected).
         variables: a registered variable set: ``"ward"``, ``"ashikhmin-shirley"``, ``"lafortune"``,
            ``"lafortune-anisotropic"`` or a user's own.
         degree: ``p``, or a sequence of degrees: the result then has a leading degree axis.
@@ -216,8 +218,12 @@ def fit_polynomial(
     max_degree = int(degrees.max())
 
     values = jnp.asarray(values)
+    if jnp.issubdtype(values.dtype, jnp.complexfloating):
+        raise InputError(f"values: expected real BRDF values, found dtype {values.dtype}")
     if not jnp.issubdtype(values.dtype, jnp.floating):
         values = values.astype(jnp.result_type(float))
+    elif jnp.finfo(values.dtype).bits < 32:  # LAPACK has no half precision: float16/bfloat16 are fitted in float32
+        values = values.astype(jnp.float32)
     dtype = values.dtype
     u = jnp.asarray(u, dtype)
     v = jnp.asarray(v, dtype)
