@@ -106,3 +106,27 @@ def test_models_scale_free_at_extreme_lengths():
         want = np.asarray(f(u, v))
         np.testing.assert_allclose(np.asarray(f(1e200 * u, 1e-11 * v)), want, rtol=1e-10, atol=1e-12)
         assert np.all(np.isfinite(want))
+
+
+@pytest.mark.parametrize("dtype", [jnp.float16, jnp.bfloat16])
+def test_half_precision_values_fitted_in_float32(dtype):
+    """LAPACK has no half precision (the solve crashed inside XLA with NotImplementedError): float16 and
+    bfloat16 values are fitted in float32, with the L2 of the float64 fit of the rounded values."""
+    u, v = random_hemisphere(100, seed=0)
+    b = jnp.asarray(0.1 + u[:, 2] * v[:, 2] + 0.2 * u[:, 0] * v[:, 0], dtype)
+    m = pj.fit_polynomial(u, v, b, degree=3)
+    ref = pj.fit_polynomial(u, v, np.asarray(b, np.float64), degree=3)
+    assert m.coefficients.dtype == jnp.float32 and int(m.status) == pj.FitStatus.OK
+    np.testing.assert_allclose(float(m.l2), float(ref.l2), rtol=1e-3, atol=1e-6)
+
+
+def test_complex_values_rejected_by_both_fitters():
+    """Complex values used to lose their imaginary part silently; both fitters name ``values``."""
+    import baselines as bl
+
+    u, v = random_hemisphere(30, seed=0)
+    b = (0.1 + u[:, 2]).astype(np.complex64)
+    with pytest.raises(pj.InputError, match="values: expected real BRDF values, found dtype complex64"):
+        pj.fit_polynomial(u, v, b, degree=2)
+    with pytest.raises(pj.InputError, match="values: expected real BRDF values, found dtype complex64"):
+        bl.fit("ward", u, v, b)
