@@ -44,7 +44,8 @@ def test_curet_negative_noise_values_are_kept_and_fitted():
     assert bool(np.all(np.asarray(d.mask)[vals < 0]))
     m = pj.fit_polynomial(d, degree=5)
     assert np.all(np.asarray(m.status) == pj.FitStatus.OK) and np.all(np.isfinite(np.asarray(m.l2)))
-    lane = int(np.argwhere((vals < 0).any(-1)).ravel()[0])
+    kept = np.asarray(pj.cutoff_mask(d.u, d.v))
+    lane = int(np.argwhere((vals[:, kept] < 0).any(-1)).ravel()[0])  # a negative value inside the 80-degree cutoff
     clipped = pj.fit_polynomial(d.u, d.v, np.maximum(vals[lane], 0.0), degree=5)
     assert float(m.l2[lane]) != float(clipped.l2)  # the negative values entered the fit
 
