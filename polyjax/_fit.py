@@ -180,7 +180,7 @@ def fit_polynomial(
         rcond: relative singular-value cutoff for the rank; default ``eps * max(m, sqrt(n))``.
         rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
            (raise :class:`polyjax.FitError`). Lanes with no samples are always flagged ``NO_SAMPLES``
-           (L2 = inf) and raise under ``"error"``.
+           (L2 = inf) and raise under ``"error"``. Under an outer ``jit`` nothing can be raised: read ``status``.
         nonfinite: ``"error"`` (raise on NaN/inf in ``values``; under an outer ``jit``, where nothing can be
            raised, such a lane is flagged ``NONFINITE_VALUES`` with or without ``mask``) or ``"mask"``
            (drop those samples).
