@@ -37,6 +37,11 @@ def test_component_constant_up_to_rounding_flagged_in_both_bases(retro, variable
         assert np.all(np.isfinite(off)) and np.abs(off).max() < 10.0
         np.testing.assert_allclose(np.asarray(m(a, a)), 0.1 + a[:, 2] ** 3, atol=0.02)
     np.testing.assert_allclose(np.asarray(fits["monomial"](a, c)), np.asarray(fits["legendre"](a, c)), rtol=1e-7, atol=1e-9)
+    # the paper's coefficients (equation (3) in the raw components) drop the constant component too
+    m = fits["legendre"]
+    z = (pj.explanatory_variables(variables, a, c) - m.mean) @ m.rotation
+    beta = m.paper_coefficients()
+    np.testing.assert_allclose(np.asarray(pj.evaluate_paper_form(beta, z, 4)), np.asarray(m(a, c)), rtol=1e-9, atol=1e-12)
 
 
 def test_constant_component_model_survives_save_and_load(retro, tmp_path):
