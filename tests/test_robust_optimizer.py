@@ -60,3 +60,17 @@ def test_far_start_and_step_limit_reported_as_max_steps(problem):
     f = bl.fit(NAME, u, v, y, starts=far, max_steps=3, refine=None)
     assert int(f.status) == bl.BaselineStatus.MAX_STEPS and not bool(f.success)
     assert np.all(np.isfinite(np.asarray(f.params))) and np.isfinite(float(f.l2))
+
+
+@pytest.mark.parametrize("backend, refine", [("optimistix", 1), ("jaxopt", None), ("jaxopt", 1)])
+def test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_stage_path(problem, backend, refine):
+    """The same overflowing starts through jaxopt and through the staged run (every start a few
+    steps, then the best one refined): the finite start is kept, the others are NONFINITE with L2 inf."""
+    u, v, y, m = problem
+    good = m.to_raw(jnp.asarray(TRUE_PARAMS[NAME])) + 0.3
+    starts = jnp.stack([jnp.full((4,), 1e200), good, jnp.array([1e154, 1e154, 0.5, 0.5])])
+    f = bl.fit(NAME, u, v, y, starts=starts, max_steps=60, refine=refine, backend=backend)
+    sl2, ss = np.asarray(f.start_l2), np.asarray(f.start_status)
+    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == bl.BaselineStatus.NONFINITE)
+    assert int(f.best_start) == 1 and bool(f.success) and float(f.l2) < 1e-8
+    assert np.all(np.isfinite(np.asarray(f.params)))
