@@ -79,9 +79,11 @@ def test_pca_signs_follow_the_first_largest_entry_for_any_row_order(seed, k, sym
 
 @functools.lru_cache(maxsize=None)
 def fitted(variables):
+    """The model fitted to non-reciprocal data, as a jitted ``f(u, v)``."""
     u, v = random_hemisphere(120, seed=11, min_cos=0.05)
     b = 0.15 + 0.8 * np.maximum(-0.9 * (u[:, 0] * v[:, 0] + u[:, 1] * v[:, 1]) + u[:, 2] * v[:, 2], 0.0) ** 6
-    return pj.fit_polynomial(u, v, b + 0.05 * u[:, 0], variables=variables, degree=8)
+    model = pj.fit_polynomial(u, v, b + 0.05 * u[:, 0], variables=variables, degree=8)
+    return jax.jit(lambda uu, vv: model(uu, vv))
 
 
 angles = st.tuples(st.floats(0.0, np.deg2rad(100.0)), st.floats(-np.pi, np.pi))
