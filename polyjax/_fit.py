@@ -292,10 +292,17 @@ def fit_polynomial(
             bad = np.argwhere(status != FitStatus.OK)
             first = tuple(int(i) for i in bad[0])
             code = FitStatus(int(status[first] if status.ndim else status))
+            at = lambda a: int(np.asarray(a)[first] if np.ndim(a) else a)  # noqa: E731
+            what = {
+                FitStatus.NO_SAMPLES: "have no samples left to fit",
+                FitStatus.RANK_DEFICIENT: "are rank-deficient",
+                FitStatus.NONFINITE_VALUES: "have non-finite values",
+            }.get(code, f"ended with status {code.name}")
+            where = f"first at batch index {first}" if first else "the fit"
             raise FitError(
-                f"fit_polynomial: {len(bad)} of {status.size} fits are {code.name.lower().replace('_', ' ')} "
-                f"(first at batch index {first}; rank {np.asarray(model.rank).ravel()[0]} of "
-                f"{np.asarray(model.n_params).ravel()[0]} parameters, {np.asarray(model.n_used).ravel()[0]} samples used)"
+                f"fit_polynomial: {len(bad)} of {status.size} fits {what} ({where}: rank {at(model.rank)} of "
+                f"{at(model.n_params)} parameters, {at(model.n_used)} samples used after the cutoff and mask); "
+                "pass rank_deficient='flag' to get a minimum-norm solution and read model.status instead"
             )
     return model
 
