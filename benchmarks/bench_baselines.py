@@ -12,75 +12,20 @@ Usage: ``POLYJAX_DATA=... python benchmarks/bench_baselines.py [--quick] [--scip
 """
 
 import argparse
-import time
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import baselines as bl  # noqa: E402
 import polyjax as pj  # noqa: E402
-from baselines import _fit  # noqa: E402
+from polyjax._references import scipy_best_l2  # noqa: E402
+from polyjax._reproduce import PAPER_TABLE2, PAPER_TABLE4, TABLE2_IDS, timed  # noqa: E402
 
-#: Table 4 of the paper: average fitting time (s) per material, Pentium D 2.66 GHz.
-PAPER_TIME = {
-    "ashikhmin-shirley": 0.33175, "blinn-phong": 0.38900, "cook-torrance": 0.34725, "lafortune": 0.36540,
-    "oren-nayar": 0.15596, "ward": 0.29025, "ward-duer": 0.26925,
-}
-#: Table 2 of the paper: L2 per model on Felt (1), Orange Peel (55), Quarry Tile (25), Slate_a (33), Slate_b (34).
-PAPER_TABLE2 = {
-    "ashikhmin-shirley": [0.0190, 0.0217, 0.0165, 0.0121, 0.0223],
-    "blinn-phong": [0.0518, 0.0626, 0.0369, 0.0196, 0.0586],
-    "cook-torrance": [0.0229, 0.0213, 0.0136, 0.0107, 0.0236],
-    "lafortune": [0.0170, 0.0245, 0.0117, 0.0070, 0.0184],
-    "oren-nayar": [0.0571, 0.0740, 0.0429, 0.0249, 0.0711],
-    "ward": [0.0385, 0.0420, 0.0241, 0.0124, 0.0383],
-    "ward-duer": [0.0238, 0.0219, 0.0137, 0.0109, 0.0243],
-    "zernike": [0.0087, 0.0126, 0.0069, 0.0059, 0.0068],
-}
-TABLE2_IDS = [1, 55, 25, 33, 34]
-
-
-def timed(f, repeats):
-    best = np.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = f()
-        jax.block_until_ready(out)
-        best = min(best, time.perf_counter() - t)
-    return out, best
-
-
-def scipy_fits(name, data, starts, idx):
-    """scipy least_squares (method='lm') from every start of materials ``idx``: best L2 and seconds per material."""
-    from scipy.optimize import least_squares
-
-    u, v, y, wl, wc2, _ = _fit._prepare(data.u, data.v, data.values, None, None, 80.0)
-    model = bl.get_model(name)
-    sw = jnp.sqrt(wc2 / jnp.sum(wl, -1, keepdims=True))
-    fn = _fit._residual_fn(model, u, v)
-    res = jax.jit(lambda r, yb, s: fn(r, (yb, s)))
-    jac = jax.jit(lambda r, yb, s: jax.jacfwd(fn)(r, (yb, s)))
-    s0 = np.asarray(starts)
-    res(s0[0, 0], y[0], sw[0]).block_until_ready()  # compile outside the timing
-    jac(s0[0, 0], y[0], sw[0]).block_until_ready()
-    best = np.full(len(idx), np.inf)
-    t = time.perf_counter()
-    for k, b in enumerate(idx):
-        yb, sb = y[b], sw[b]
-        for s in range(s0.shape[1]):
-            try:
-                sol = least_squares(lambda r: np.asarray(res(r, yb, sb)), s0[b, s],
-                                    jac=lambda r: np.asarray(jac(r, yb, sb)), method="lm")
-            except Exception:  # noqa: BLE001
-                continue
-            c = float(np.sqrt(np.sum(sol.fun**2)))
-            if np.isfinite(c):
-                best[k] = min(best[k], c)
-    return best, (time.perf_counter() - t) / len(idx)
+#: Table 4 of the paper: average fitting time (s) per material of the nonlinear models, Pentium D 2.66 GHz.
+PAPER_TIME = {name: t for name, t in PAPER_TABLE4.items() if not name.startswith("poly:")}
 
 
 def main():
@@ -107,11 +52,7 @@ def main():
     all_ok, all_n = 0, 0
     fits = {}
     for name in bl.PAPER_MODELS:
-        t0 = time.perf_counter()
-        fit = bl.fit(name, data, n_starts=args.n_starts, key=key)
-        jax.block_until_ready(fit.l2)
-        first = time.perf_counter() - t0
-        fit, dt = timed(lambda: bl.fit(name, data, n_starts=args.n_starts, key=key), repeats)
+        fit, first, dt = timed(lambda: bl.fit(name, data, n_starts=args.n_starts, key=key), repeats)
         fits[name] = fit
         per = dt / nm
         l2 = np.asarray(fit.l2)
@@ -120,7 +61,7 @@ def main():
         line = f"{name:18s} {l2.mean():8.5f} {np.median(l2):8.5f} {notconv:8d} {first - dt:9.1f} {per * 1e3:7.2f} "
         if name in PAPER_TIME:
             starts = bl.initial_guesses(name, data, n_starts=args.n_starts, key=key)
-            ref, sc_per = scipy_fits(name, data, starts, idx)
+            ref, sc_per = scipy_best_l2(name, data, starts, idx)
             ok = l2[idx] <= ref * (1 + 1e-3) + 1e-7
             all_ok += int(ok.sum())
             all_n += len(idx)

@@ -35,6 +35,7 @@ import numpy as np
 from jaxtyping import Array
 
 from ._cli import PAPER_TABLE1
+from ._references import numpy_design, numpy_lstsq_l2, scipy_best_l2
 
 # ------------------------------------------------------------------------------------------------
 # the paper's numbers (Ozturk, Kurt, Bilgili, Gungor, Computers & Graphics 32 (2008) 149-158)
@@ -84,6 +85,12 @@ PAPER_LOWEST_COUNTS: dict[str, int] = {"poly:ashikhmin-shirley:5": 45, "poly:laf
 VARIABLE_SETS = ("ashikhmin-shirley", "lafortune", "ward")
 CURET_POLY = (("ashikhmin-shirley", 5), ("lafortune", 7), ("ward", 7))  # Tables 2 and 4, Figs. 3 and 6
 MERL_POLY = (("ashikhmin-shirley", 3), ("lafortune", 5), ("ward", 5))  # Table 3, Figs. 4 and 5
+FIG7_POLY = (("lafortune", 2), ("lafortune", 8))  # Fig. 7: the linear models on CUReT
+
+
+def poly_configs(degrees, required) -> list[tuple[str, int]]:
+    """The ``(variables, p)`` fits of a run: every variable set at every degree of the sweep, plus ``required``."""
+    return sorted({(var, p) for var in VARIABLE_SETS for p in degrees} | set(required))
 LABELS = {
     "ashikhmin-shirley": "Ashikhmin-Shirley", "blinn-phong": "Blinn-Phong", "cook-torrance": "Cook-Torrance",
     "lafortune": "Lafortune", "oren-nayar": "Oren-Nayar", "ward": "Ward", "ward-duer": "Ward-Duer",
@@ -113,7 +120,7 @@ class Settings:
     merl_names: tuple[str, ...] = ()
     merl_fit_subsample: int = 20000
     merl_eval_subsample: int | None = None
-    degrees: tuple[int, ...] = tuple(range(1, 11))
+    degrees: tuple[int, ...] = tuple(range(1, 11))  # the accuracy-vs-time sweep; the tables' fits always run
     size: int = 128
     repeats: int = 3
     scipy_materials: int = 8
@@ -128,9 +135,9 @@ class Settings:
 
         if quick:
             return cls(
-                quick=True, curet_ids=TABLE2_IDS, nonlinear=("lafortune", "ward"), n_starts=4,
+                quick=True, curet_ids=TABLE2_IDS, nonlinear=("lafortune",), n_starts=4,
                 merl_names=("blue-metallic-paint", "orange-paint"), merl_fit_subsample=2000,
-                merl_eval_subsample=20000, degrees=(1, 2, 3, 5, 7, 8), size=24, repeats=1, scipy_materials=1,
+                merl_eval_subsample=20000, degrees=(), size=24, repeats=1, scipy_materials=1,
             )
         return cls(
             quick=False, curet_ids=tuple(pj.data.ISOTROPIC_52), nonlinear=tuple(baselines.NONLINEAR_MODELS),
@@ -220,10 +227,15 @@ class Run:
         self.out = out
         self.root = root
         self.bar = progress
-        self.res: dict = {"settings": asdict(settings)}
+        self.res: dict = {"settings": asdict(settings), "step_seconds": {}}
         self.fits: dict = {}
+        self._t = time.perf_counter()
 
     def step(self, what: str):
+        """Mark the end of a step: its wall time (compilation included) goes to ``results.json``."""
+        now = time.perf_counter()
+        self.res["step_seconds"][what] = round(now - self._t, 3)
+        self._t = now
         if self.bar is not None:
             self.bar.set_description(what)
             self.bar.update(1)
@@ -290,8 +302,9 @@ class Run:
             f, first, best = timed(lambda: baselines.fit("zernike", d, order=order), s.repeats)
             out[key_] = self._record(f.l2, first, best, nm, f)
         self.step("CUReT Zernike")
+        configs = poly_configs(s.degrees, CURET_POLY + FIG7_POLY)
         for var in VARIABLE_SETS:
-            for p in s.degrees:
+            for p in (p for v, p in configs if v == var):
                 m, first, best = timed(lambda: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
                 out[poly_key(var, p)] = self._record(m.l2, first, best, nm, m,
                                                      extra={"n_params": int(np.asarray(m.n_params).ravel()[0])})
@@ -323,8 +336,9 @@ class Run:
             l2 = pj.l2_error(d.values, pred, d.u, d.v, weights=d.weights, mask=d.mask)  # (m, 3) on the eval grid
             out[name] = self._record(l2, first, best, nm, f, extra={"l2_on_fit_subsample": np.asarray(f.l2).tolist()})
             self.step(f"MERL {name}")
+        configs = poly_configs(s.degrees, MERL_POLY)
         for var in VARIABLE_SETS:
-            for p in s.degrees:
+            for p in (p for v, p in configs if v == var):
                 m, first, best = timed(lambda: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
                 out[poly_key(var, p)] = self._record(m.l2, first, best, nm, m)
             self.step(f"MERL poly {var}")
@@ -395,8 +409,8 @@ class Run:
         fig.tight_layout()
         fig.savefig(self.out / "fig6_curet52.png", dpi=110)
         plt.close(fig)
-        fig7_keys = [poly_key("lafortune", 2), poly_key("lafortune", 8), "zernike2", "zernike"]
-        order = np.argsort(np.asarray(c[poly_key("lafortune", 8)]["l2"]))
+        fig7_keys = [poly_key(*FIG7_POLY[0]), poly_key(*FIG7_POLY[1]), "zernike2", "zernike"]
+        order = np.argsort(np.asarray(c[poly_key(*FIG7_POLY[1])]["l2"]))
         fig, ax = plt.subplots(figsize=(12, 5))
         for k in fig7_keys:
             npar = f" ({c[k]['n_params']} par.)" if "n_params" in c[k] else (" (55 par.)" if k == "zernike" else " (5 par.)")
@@ -500,39 +514,17 @@ class Run:
 
     def _scipy(self):
         import jax
-        import jax.numpy as jnp
-        from scipy.optimize import least_squares
 
         import baselines
-        import polyjax as pj
 
         s, d = self.s, self.curet
         nm = d.values.shape[0]
         idx = np.linspace(0, nm - 1, s.scipy_materials).round().astype(int) if s.scipy_materials < nm else np.arange(nm)
         key = jax.random.PRNGKey(s.seed)
-        w, wc2 = pj.fit_weights(d.u, d.v, d.weights, d.mask, 80.0)
-        sw2 = wc2 / jnp.sum(w, axis=-1, keepdims=True)
-        y = jnp.asarray(d.values)
         out = {"materials": [d.names[i] for i in idx], "n_starts": s.n_starts, "method": "lm (MINPACK)", "models": {}}
         for name in s.nonlinear:
-            starts = np.asarray(baselines.initial_guesses(name, d, n_starts=s.n_starts, key=key))
-            res = jax.jit(lambda r, yb, sb: baselines.residuals(name, r, d.u, d.v, yb, sb))
-            jac = jax.jit(jax.jacfwd(lambda r, yb, sb: baselines.residuals(name, r, d.u, d.v, yb, sb)))
-            _block((res(starts[0, 0], y[0], sw2[0]), jac(starts[0, 0], y[0], sw2[0])))
-            best = np.full(len(idx), np.inf)
-            t0 = time.perf_counter()
-            for k, b in enumerate(idx):
-                yb, sb = y[b], sw2[b]
-                for st in starts[b]:
-                    try:
-                        sol = least_squares(lambda r: np.asarray(res(r, yb, sb)), st,
-                                            jac=lambda r: np.asarray(jac(r, yb, sb)), method="lm")
-                    except Exception:  # noqa: BLE001 - a failed start is skipped, as in the batched fit
-                        continue
-                    cst = float(np.sqrt(np.sum(sol.fun ** 2)))
-                    if np.isfinite(cst):
-                        best[k] = min(best[k], cst)
-            per = (time.perf_counter() - t0) / len(idx)
+            starts = baselines.initial_guesses(name, d, n_starts=s.n_starts, key=key)
+            best, per = scipy_best_l2(name, d, starts, idx)
             ours = np.asarray(self.curet_out[name]["l2"])[idx]
             ours_t = self.curet_out[name]["seconds_per_material"]
             out["models"][name] = {
@@ -555,10 +547,10 @@ class Run:
             wts = np.ones(u.shape[0]) if d.weights is None else np.asarray(d.weights)
             out[ds] = {"materials": len(mats), "configs": {}}
             for var, p in configs:
-                _numpy_design(u[:64], v[:64], wts[:64], var, p)  # warm up the JAX explanatory variables
+                numpy_design(u[:64], v[:64], wts[:64], var, p)  # warm up the JAX explanatory variables
                 t0 = time.perf_counter()
-                a, keep, sw = _numpy_design(u, v, wts, var, p)  # shared geometry: one design for every material
-                l2 = [[_numpy_lstsq_l2(a, keep, sw, y, wts) for y in vals[b].reshape(-1, vals.shape[-1])] for b in mats]
+                a, keep, sw = numpy_design(u, v, wts, var, p)  # shared geometry: one design for every material
+                l2 = [[numpy_lstsq_l2(a, keep, sw, y, wts) for y in vals[b].reshape(-1, vals.shape[-1])] for b in mats]
                 per = (time.perf_counter() - t0) / len(mats)
                 ref_l2 = np.asarray(ours[poly_key(var, p)]["l2"])[mats].reshape(len(mats), -1)
                 out[ds]["configs"][poly_key(var, p)] = {
@@ -627,31 +619,6 @@ def pareto_front(points) -> list[int]:
             front.append(i)
             best = points[i][1]
     return front
-
-
-def _numpy_design(u, v, w, variables, p, cutoff_deg=80.0):
-    """Equation (13) with numpy: PCA of the kept samples, monomials of the scaled components, rows scaled by
-    ``sqrt(w_i) cos(theta_u,i)`` (equation (11)). Returns ``(A, keep, row_scale)``."""
-    import polyjax as pj
-
-    c = np.cos(np.deg2rad(cutoff_deg))
-    keep = (u[:, 2] >= c) & (v[:, 2] >= c) & (w > 0)
-    x = np.asarray(pj.explanatory_variables(variables, u[keep], v[keep]))
-    xm = x.mean(0)
-    _, vec = np.linalg.eigh(np.cov((x - xm).T))
-    z = (x - xm) @ vec
-    z = z / np.maximum(np.abs(z).max(0), 1e-300)
-    sw = np.sqrt(w[keep]) * u[keep, 2]
-    a = np.concatenate([np.ones((len(z), 1))] + [z ** k for k in range(1, p + 1)], axis=1) * sw[:, None]
-    return a, keep, sw
-
-
-def _numpy_lstsq_l2(a, keep, sw, y, w) -> float:
-    """``numpy.linalg.lstsq`` of one lane on the design of :func:`_numpy_design`; its L2 (equation (11))."""
-    b = y[keep] * sw
-    beta = np.linalg.lstsq(a, b, rcond=None)[0]
-    r = b - a @ beta
-    return float(np.sqrt(np.sum(r * r) / np.sum(w[keep])))
 
 
 # ------------------------------------------------------------------------------------------------
