@@ -87,7 +87,7 @@ def test_every_baseline_finite_at_degenerate_directions_through_the_fitted_model
     assert np.all(np.asarray(f(np.zeros((5, 3)), v)) == 0.0)
 
 
-def test_cutoff_keeps_the_same_merl_bins_in_float32_and_float64():
+def test_cutoff_float32_keeps_every_merl_bin_float64_keeps():
     """Hard case: MERL bin centres lie exactly at 80 degrees; float32 rounding dropped some (tolerance 1e-9)."""
     th, td, pd = pj.data.merl_bin_angles()
     u, v = pj.data.rusinkiewicz_to_directions(th, td, pd)
