@@ -32,6 +32,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="scipy on 6 materials, two timing repeats")
     ap.add_argument("--n-starts", type=int, default=16)
+    ap.add_argument("--stage-steps", type=int, default=None, help="baselines.fit stage_steps (default: fit's own)")
+    ap.add_argument("--refine", type=int, default=None, help="baselines.fit refine (default: fit's own)")
     ap.add_argument("--scipy-materials", type=int, default=None, help="materials for the scipy reference (default 52, quick 6)")
     args = ap.parse_args()
     data = pj.data.load_curet(samples=pj.data.ISOTROPIC_52)
@@ -40,6 +42,7 @@ def main():
     idx = np.linspace(0, nm - 1, k_sc).round().astype(int) if k_sc < nm else np.arange(nm)
     repeats = 2 if args.quick else 3
     key = jax.random.PRNGKey(0)
+    opts = {k: val for k, val in (("stage_steps", args.stage_steps), ("refine", args.refine)) if val is not None}
     print(f"CUReT {nm} isotropic samples x {data.values.shape[-1]} geometries; {args.n_starts} starts per material; "
           f"devices {jax.devices()}")
     if k_sc < nm:
@@ -52,7 +55,7 @@ def main():
     all_ok, all_n = 0, 0
     fits = {}
     for name in bl.PAPER_MODELS:
-        fit, first, dt = timed(lambda: bl.fit(name, data, n_starts=args.n_starts, key=key), repeats)
+        fit, first, dt = timed(lambda: bl.fit(name, data, n_starts=args.n_starts, key=key, **opts), repeats)
         fits[name] = fit
         per = dt / nm
         l2 = np.asarray(fit.l2)
