@@ -25,14 +25,6 @@ def _is_tracer(x) -> bool:
     return isinstance(x, jax.core.Tracer)
 
 
-@jax.jit
-def _unit_directions(u, v):
-    """Unit ``u``, ``v`` and where both have a direction (one compiled pass, not op-by-op on a million rows)."""
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
-    return u, v, ok_u & ok_v
-
-
 def _design_for(x, keep, max_degree, basis, interactions):
     """PCA of the kept samples, affine scaling, and the design matrix (equation (13)).
 
@@ -238,7 +230,9 @@ def fit_polynomial(
     batch = values.shape[:-1]
     concrete = not any(_is_tracer(a) for a in (u, v, values, weights, mask))
     n = check_samples(u, v, values, concrete=not (_is_tracer(u) or _is_tracer(v)))
-    u, v, dir_ok = _unit_directions(u, v)
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    dir_ok = ok_u & ok_v
     m = jnp.broadcast_to(dir_ok, values.shape) if mask is None else jnp.broadcast_to(jnp.asarray(mask, bool) & dir_ok, values.shape)
     if concrete:
         finite = np.isfinite(np.asarray(values))

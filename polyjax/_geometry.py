@@ -8,6 +8,7 @@ the surface. Spherical angles: ``theta`` from the normal, ``phi`` azimuth from `
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
@@ -40,7 +41,12 @@ def safe_normalize(w: ArrayLike) -> tuple[Float[Array, "... 3"], Bool[Array, "..
     Returns:
         ``(unit, valid)``: unit vectors and a mask that is False where the input had no direction.
     """
-    w = jnp.asarray(w)
+    return _safe_normalize(jnp.asarray(w))
+
+
+@jax.jit
+def _safe_normalize(w):
+    # one compiled pass: op by op on a million rows (a MERL grid) it cost ~0.1 s per call
     finite = jnp.all(jnp.isfinite(w), axis=-1)
     big = jnp.max(jnp.abs(jnp.where(finite[..., None], w, 0.0)), axis=-1, keepdims=True)
     scaled = jnp.where(big > 0, w / jnp.where(big > 0, big, 1.0), 0.0)

@@ -42,22 +42,12 @@ def numpy_design(u, v, w, variables: str, p: int, cutoff_deg: float = 80.0):
     return a, keep, sw
 
 
-def numpy_lstsq_l2(a, keep, sw, y, w):
-    """``numpy.linalg.lstsq`` on the design of :func:`numpy_design`; the L2 of equation (11).
-
-    Args:
-        a, keep, sw: the output of :func:`numpy_design`.
-        y: ``(n,)`` values of one lane, or ``(n, r)`` for ``r`` lanes solved as one multi-right-hand-side problem.
-        w: ``(n,)`` sample weights.
-
-    Returns:
-        The L2 error: a float for one lane, ``(r,)`` for several.
-    """
-    b = y[keep] * (sw if y.ndim == 1 else sw[:, None])
+def numpy_lstsq_l2(a, keep, sw, y, w) -> float:
+    """``numpy.linalg.lstsq`` of one lane ``y (n,)`` on the design of :func:`numpy_design`; the L2 of equation (11)."""
+    b = y[keep] * sw
     beta = np.linalg.lstsq(a, b, rcond=None)[0]
     r = b - a @ beta
-    l2 = np.sqrt(np.sum(r * r, axis=0) / np.sum(w[keep]))
-    return float(l2) if y.ndim == 1 else l2
+    return float(np.sqrt(np.sum(r * r) / np.sum(w[keep])))
 
 
 def scipy_best_l2(name: str, data, starts, idx):
