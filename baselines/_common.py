@@ -55,6 +55,25 @@ class Transform:
             return self.hi * jnp.abs(jnp.sin(r))
         return r
 
+    def snap(self, r, tol: float = 1e-3):
+        """Pull ``r`` onto the range limit it is within ``tol`` of, in the unit coordinate ``sin^2(r)``.
+
+        The ``sin^2`` transforms reach their limits at the stationary points ``r = k pi / 2``, where
+        the Jacobian column of the parameter vanishes. Gauss-Newton ignores the transform's curvature
+        there, so a fit whose optimum lies beyond a limit creeps towards it without meeting the step
+        tolerance; put on the limit exactly, the parameter stays there and the others converge.
+
+        Returns:
+            ``(r_snapped, at_limit)``; ``positive`` and ``real`` parameters are returned unchanged
+            with ``at_limit = False``.
+        """
+        if self.kind not in ("unit", "logbounded", "bounded"):
+            return r, jnp.zeros(jnp.shape(r), bool)
+        t = jnp.sin(r) ** 2
+        near = (t < tol) | (t > 1.0 - tol)
+        half = 0.5 * np.pi
+        return jnp.where(near, half * jnp.round(r / half), r), near
+
     def inverse(self, p):
         """The preimage in ``[0, pi/2]`` (or ``[0, inf)``); values on or beyond a bound are pulled just inside."""
         if self.kind == "positive":
@@ -122,6 +141,11 @@ class BaselineModel:
     def to_params(self, raw: Float[Array, "... P"]) -> Float[Array, "... P"]:
         """Map unconstrained parameters to physical ones."""
         return jnp.stack([t.forward(raw[..., i]) for i, t in enumerate(self.transforms)], axis=-1)
+
+    def snap_to_limits(self, raw: Float[Array, "... P"], tol: float = 1e-3):
+        """:meth:`Transform.snap` of every parameter: ``(raw_snapped, at_limit)``, both ``(..., P)``."""
+        out = [t.snap(raw[..., i], tol) for i, t in enumerate(self.transforms)]
+        return jnp.stack([o[0] for o in out], axis=-1), jnp.stack([o[1] for o in out], axis=-1)
 
     def to_raw(self, params: Float[Array, "... P"]) -> Float[Array, "... P"]:
         """Inverse of :meth:`to_params` (values at or beyond the range limits are pulled inside)."""

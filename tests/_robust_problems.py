@@ -63,4 +63,5 @@ def baseline_fit_at(name: str, params) -> bl.BaselineFit:
     p = jnp.asarray(params)[None]
     z = jnp.zeros((1,), jnp.int32)
     return bl.BaselineFit(params=p, raw=p, l2=jnp.zeros((1,)), status=z, steps=z, success=z == 0,
-                          start_l2=jnp.zeros((1, 1)), start_status=z[:, None], best_start=z, name=name)
+                          start_l2=jnp.zeros((1, 1)), start_status=z[:, None], best_start=z,
+                          at_limit=jnp.zeros(p.shape, bool), name=name)

@@ -105,6 +105,8 @@ def test_bad_input():
         bl.fit("ward", u, v, jnp.ones(20).at[3].set(jnp.nan))
     with pytest.raises(pj.UnknownNameError):
         bl.fit("torrance", u, v, jnp.ones(20))
+    with pytest.raises(pj.InputError, match="limit_steps"):
+        bl.fit("ward", u, v, jnp.ones(20), limit_steps=-1)
 
 
 @pytest.mark.data

@@ -54,10 +54,11 @@ def test_start_exactly_on_the_bounds_stalls_and_multistart_recovers(problem):
 
 
 def test_far_start_and_step_limit_reported_as_max_steps(problem):
-    """A start 1e6 times too bright with three steps: MAX_STEPS, success False, finite parameters and L2."""
+    """A start 1e6 times too bright with three steps (and no finishing steps at the range limits):
+    MAX_STEPS, success False, finite parameters and L2."""
     u, v, y, m = problem
     far = m.to_raw(jnp.array([1e5, 1e5, 2.9, 0.999]))[None]
-    f = bl.fit(NAME, u, v, y, starts=far, max_steps=3, refine=None)
+    f = bl.fit(NAME, u, v, y, starts=far, max_steps=3, refine=None, limit_steps=0)
     assert int(f.status) == bl.BaselineStatus.MAX_STEPS and not bool(f.success)
     assert np.all(np.isfinite(np.asarray(f.params))) and np.isfinite(float(f.l2))
 
@@ -74,3 +75,35 @@ def test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_s
     assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == bl.BaselineStatus.NONFINITE)
     assert int(f.best_start) == 1 and bool(f.success) and float(f.l2) < 1e-8
     assert np.all(np.isfinite(np.asarray(f.params)))
+
+
+@pytest.mark.parametrize("name, params, limit", [
+    ("ashikhmin-shirley", (0.3, 0.5, 0.1, 1.0), [False, False, True, True]),  # n at its lower limit, F0 = 1
+    ("cook-torrance", (0.3, 0.05, 0.3, 1.0), [False, False, False, True]),  # F0 = 1
+])
+def test_optimum_on_a_range_limit_converges_and_is_flagged(name, params, limit):
+    """Data whose best parameters lie on a limit of their range: Gauss-Newton alone creeps towards it
+    (the sin^2 transform's Jacobian column vanishes there) and used to end at the step limit; the fit
+    puts the parameter on the limit, converges, recovers the parameters and reports ``at_limit``."""
+    u, v = synthetic_geometry(300, seed=7)
+    y = bl.get_model(name).evaluate(jnp.asarray(params), u, v)
+    f = bl.fit(name, u, v, y, n_starts=8)
+    assert bool(f.success) and int(f.status) == bl.BaselineStatus.OK, (int(f.status), int(f.steps))
+    assert float(f.l2) < 1e-6 * float(jnp.sqrt(jnp.mean(y * y)))
+    np.testing.assert_allclose(f.params, params, rtol=1e-3, atol=1e-6)
+    assert np.asarray(f.at_limit).tolist() == limit
+
+
+@pytest.mark.data
+def test_curet_fits_at_range_limits_converge():
+    """Real cases: CUReT samples whose Ashikhmin-Shirley fit (F0 -> 1, n -> 0.1) used to stop at the step
+    limit now converge, with the limited parameters flagged, at an L2 no worse than a run given 3x the steps."""
+    import polyjax as pj
+
+    data = pj.data.load_curet(samples=[6, 7, 13, 19, 22])
+    f = bl.fit("ashikhmin-shirley", data)
+    assert np.all(np.asarray(f.success)), np.asarray(f.status)
+    at = np.asarray(f.at_limit)
+    assert np.all(at.any(axis=-1)) and not at[:, :2].any()  # F0 or n on a limit, albedos never
+    long = bl.fit("ashikhmin-shirley", data, max_steps=300)
+    assert np.all(np.asarray(f.l2) <= np.asarray(long.l2) * (1 + 1e-4))
