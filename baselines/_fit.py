@@ -76,7 +76,7 @@ class BaselineFit(eqx.Module):
         start_l2: ``(*batch, S)`` final L2 of every start (``inf`` for non-finite ones).
         start_status: ``(*batch, S)`` code of every start.
         best_start: ``(*batch,)`` index of the kept start.
-        at_limit: ``(*batch, P)`` True for a parameter on (within 1% in ``sin^2`` of) a limit of its
+        at_limit: ``(*batch, P)`` True for a parameter on (within 0.01 in ``sin^2`` of) a limit of its
             range (e.g. ``F0 = 1``, an exponent at its lower bound): the data asks for a value the
             model's valid range excludes.
         name: model name; ``backend``: solver used.
@@ -386,7 +386,7 @@ def _fit_kernel(
     pick = lambda a: jnp.take_along_axis(a, best.reshape((nb, 1) + (1,) * (a.ndim - 2)), axis=1)[:, 0]  # noqa: E731
     raw_b, code_b, steps_b, l2_b = pick(raw), pick(code), pick(steps), pick(sl2)
     # a kept start that ran out of steps next to a range limit: put it on the limit and finish from there
-    # (kept only if it converges to an L2 no worse than before)
+    # (the best candidate is kept if its L2 is no worse than before; its own status is reported)
     def limit_round(state):
         raw_b, code_b, l2_b, steps_b = state
         snapped = [model.snap_to_limits(raw_b, tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
