@@ -55,7 +55,7 @@ class Transform:
             return self.hi * jnp.abs(jnp.sin(r))
         return r
 
-    def snap(self, r, tol: float = 1e-3):
+    def snap(self, r, tol: float = 1e-2):
         """Pull ``r`` onto the range limit it is within ``tol`` of, in the unit coordinate ``sin^2(r)``.
 
         The ``sin^2`` transforms reach their limits at the stationary points ``r = k pi / 2``, where
@@ -142,7 +142,7 @@ class BaselineModel:
         """Map unconstrained parameters to physical ones."""
         return jnp.stack([t.forward(raw[..., i]) for i, t in enumerate(self.transforms)], axis=-1)
 
-    def snap_to_limits(self, raw: Float[Array, "... P"], tol: float = 1e-3):
+    def snap_to_limits(self, raw: Float[Array, "... P"], tol: float = 1e-2):
         """:meth:`Transform.snap` of every parameter: ``(raw_snapped, at_limit)``, both ``(..., P)``."""
         out = [t.snap(raw[..., i], tol) for i, t in enumerate(self.transforms)]
         return jnp.stack([o[0] for o in out], axis=-1), jnp.stack([o[1] for o in out], axis=-1)

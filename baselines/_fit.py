@@ -325,6 +325,11 @@ def _run_starts(model, backend, u, v, y, sw, scale, raw0, max_steps, rtol, atol)
     return raw, code, steps, l2 * scale
 
 
+def _at(a, idx):
+    """``a[b, idx[b]]`` for every lane ``b``: ``a`` is ``(B, S, ...)``, ``idx`` is ``(B,)``."""
+    return jnp.take_along_axis(a, idx.reshape(idx.shape + (1,) * (a.ndim - 1)), axis=1)[:, 0]
+
+
 def _pick(score_l2, code):
     """Index of the best start per lane: converged and finite first, then any finite one."""
     conv = jnp.where(code == BaselineStatus.OK, score_l2, jnp.inf)
@@ -336,7 +341,7 @@ def _pick(score_l2, code):
 # coordinate sin^2: one candidate per tolerance) is put on them and gets `limit_steps` more steps, up to
 # _LIMIT_ROUNDS times; _LIMIT_TOL flags the parameters reported as on a limit
 _LIMIT_TOLS = (1e-2, 1e-1)
-_LIMIT_TOL = 1e-2
+_LIMIT_TOL = _LIMIT_TOLS[0]
 _LIMIT_ROUNDS = 2
 
 
@@ -383,8 +388,7 @@ def _fit_kernel(
         steps = steps.at[rows, order].set(steps_sel)
         sl2 = sl2.at[rows, order].set(sl2_sel)
     best = _pick(sl2, code)
-    pick = lambda a: jnp.take_along_axis(a, best.reshape((nb, 1) + (1,) * (a.ndim - 2)), axis=1)[:, 0]  # noqa: E731
-    raw_b, code_b, steps_b, l2_b = pick(raw), pick(code), pick(steps), pick(sl2)
+    raw_b, code_b, steps_b, l2_b = _at(raw, best), _at(code, best), _at(steps, best), _at(sl2, best)
     # a kept start that ran out of steps next to a range limit: put it on the limit and finish from there
     # (the best candidate is kept if its L2 is no worse than before; its own status is reported)
     def limit_round(state):
@@ -395,7 +399,7 @@ def _fit_kernel(
         raw_p, code_p, steps_p, l2_p = _run_starts(model, backend, u, v, y, sw, scale, cand, limit_steps, rtol, atol)
         better = jnp.isfinite(l2_p) & (l2_p <= (l2_b * (1.0 + rtol) + atol * scale[:, 0])[:, None])
         c = _pick(jnp.where(better, l2_p, jnp.inf), code_p)
-        at = lambda a: jnp.take_along_axis(a, c.reshape((nb, 1) + (1,) * (a.ndim - 2)), axis=1)[:, 0]  # noqa: E731
+        at = functools.partial(_at, idx=c)
         take_p = retry & at(better)
         return (
             jnp.where(take_p[:, None], at(raw_p), raw_b), jnp.where(take_p, at(code_p), code_b),
@@ -500,9 +504,10 @@ def fit(
 
     A kept start that runs out of steps with parameters close to a limit of their range (in ``sin^2``
     within ``1e-2``, and as a second candidate ``1e-1``, of 0 or 1) is put on those limits and given
-    ``limit_steps`` more steps, twice at most; the best candidate is kept if its L2 is no worse than before. Gauss-Newton steps cannot settle on
-    a limit by themselves (the transform's Jacobian column vanishes there), which on the 52 CUReT
-    samples left 29 Ashikhmin-Shirley and 14 Cook-Torrance fits at the step limit; with this, 1 and 2.
+    ``limit_steps`` more steps, twice at most; the best candidate is kept if its L2 is no worse than
+    before. Gauss-Newton steps cannot settle on a limit by themselves (the transform's Jacobian column
+    vanishes there), which on the 52 CUReT samples left 29 Ashikhmin-Shirley and 14 Cook-Torrance fits
+    at the step limit; with this, 1 and 1.
 
     Returns:
         :class:`BaselineFit` with batch shape ``values.shape[:-1]``. A lane whose kept start did not
