@@ -1,14 +1,10 @@
 """Shared problem definitions for the baseline tests: a dense synthetic geometry, known parameters
-for every model, and scipy's least_squares as an independent reference solver."""
+for every model (scipy's least_squares reference is ``benchmarks.paper.references.scipy_best_l2``)."""
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
-
-import baselines as bl
-from baselines import _fit
 
 #: Known constrained parameters per model (inside the transforms' ranges, away from the bounds).
 TRUE_PARAMS = {
@@ -42,36 +38,3 @@ def synthetic_geometry(n: int = 400, seed: int = 0, max_deg: float = 78.0):
     mirror[:, 2] = np.abs(mirror[:, 2]) + 0.2
     v[:k] = mirror / np.linalg.norm(mirror, axis=-1, keepdims=True)
     return jnp.asarray(u), jnp.asarray(v)
-
-
-def scipy_best_l2(name, u, v, values, starts, cutoff_deg=80.0):
-    """Best L2 over ``starts`` (``(B, S, P)`` unconstrained) of scipy.optimize.least_squares (MINPACK LM).
-
-    The residual function and its Jacobian are the same JAX functions :func:`baselines.fit` minimises
-    (jitted), so only the solver differs. Returns ``(B,)`` L2 and the total number of fits.
-    """
-    from scipy.optimize import least_squares
-
-    u, v, y, wl, wc2, _ = _fit._prepare(u, v, values, None, None, cutoff_deg)
-    model = bl.get_model(name)
-    den = jnp.sum(wl, -1, keepdims=True)
-    sw = jnp.sqrt(wc2 / den)
-    fn = _fit._residual_fn(model, u, v)
-    res = jax.jit(lambda r, yb, s: fn(r, (yb, s)))
-    jac = jax.jit(lambda r, yb, s: jax.jacfwd(fn)(r, (yb, s)))
-    starts = np.asarray(starts)
-    out = np.full(y.shape[0], np.inf)
-    for b in range(y.shape[0]):
-        yb, sb = y[b], sw[b]
-        for s in range(starts.shape[1]):
-            try:
-                sol = least_squares(
-                    lambda r: np.asarray(res(r, yb, sb)), starts[b, s], jac=lambda r: np.asarray(jac(r, yb, sb)),
-                    method="lm",
-                )
-            except Exception:  # noqa: BLE001 - a failed reference start just does not count
-                continue
-            cost = float(np.sqrt(np.sum(sol.fun**2)))
-            if np.isfinite(cost):
-                out[b] = min(out[b], cost)
-    return out

@@ -1,4 +1,5 @@
-"""Shared problem definitions for the core tests: datasets, reference solvers and generated data."""
+"""Shared problem definitions for the core tests: datasets and generated data (the reference solvers are in
+``benchmarks.paper.references``, shared with the benchmarks)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,6 @@ import numpy as np
 
 import polyjax as pj
 
-#: The paper's Table 1 (Quarry Tile, Lafortune variables, p = 1..6).
-PAPER_TABLE1_QUARRY = (0.0324, 0.0205, 0.0142, 0.0116, 0.0106, 0.0093)
 VARIABLE_SETS = ("ward", "ashikhmin-shirley", "lafortune")
 SYMMETRIC_SETS = ("ward", "ashikhmin-shirley", "lafortune", "lafortune-anisotropic")
 
@@ -30,28 +29,6 @@ def random_hemisphere(n: int, seed: int = 0, min_cos: float = 0.05) -> tuple[np.
         return np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
 
     return draw(), draw()
-
-
-def numpy_reference_fit(u, v, b, variables: str, degree: int, cutoff_deg: float = 80.0):
-    """An independent numpy implementation of the paper's fit: PCA, monomial design (eq. 13), lstsq.
-
-    Returns ``(l2, predictions)``; ``predictions`` at all samples.
-    """
-    u = np.asarray(u)
-    v = np.asarray(v)
-    b = np.asarray(b)
-    x = np.asarray(pj.explanatory_variables(variables, u, v))
-    c = np.cos(np.deg2rad(cutoff_deg))
-    keep = (u[:, 2] >= c - 1e-9) & (v[:, 2] >= c - 1e-9)
-    xm = x[keep].mean(0)
-    evals, evecs = np.linalg.eigh(np.cov((x[keep] - xm).T))
-    z = (x - xm) @ evecs
-    design = np.concatenate([np.ones((len(z), 1))] + [z**d for d in range(1, degree + 1)], axis=1)
-    cu = u[:, 2]
-    beta = np.linalg.lstsq(design[keep] * cu[keep, None], b[keep] * cu[keep], rcond=None)[0]
-    pred = design @ beta
-    l2 = np.sqrt(np.mean((cu[keep] * (b[keep] - pred[keep])) ** 2))
-    return l2, pred
 
 
 def polynomial_data(variables: str, degree: int, n: int = 400, seed: int = 1):

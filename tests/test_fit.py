@@ -5,15 +5,11 @@ import pytest
 
 import polyjax as pj
 
-from _problems import (
-    PAPER_TABLE1_QUARRY,
-    SYMMETRIC_SETS,
-    VARIABLE_SETS,
-    curet,
-    numpy_reference_fit,
-    polynomial_data,
-    random_hemisphere,
-)
+from _problems import SYMMETRIC_SETS, VARIABLE_SETS, curet, polynomial_data, random_hemisphere
+from benchmarks.paper.constants import PAPER_TABLE1
+from benchmarks.paper.references import numpy_reference_fit
+
+PAPER_TABLE1_QUARRY = PAPER_TABLE1["Quarry Tile"]
 
 TABLE2 = tuple(pj.data.TABLE2_SAMPLES)
 

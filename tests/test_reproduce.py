@@ -1,4 +1,4 @@
-"""``polyjax reproduce --quick``: every table, figure and the JSON are written, with finite numbers."""
+"""``python benchmarks/reproduce.py --quick``: every table, figure and the JSON are written, with finite numbers."""
 
 import json
 import math
@@ -6,7 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from polyjax._reproduce import PAPER_TABLE2, PAPER_TABLE3, PAPER_TABLE4, main, pareto_front
+from benchmarks.paper.constants import PAPER_TABLE2, PAPER_TABLE3, PAPER_TABLE4
+from benchmarks.paper.figures import pareto_front
+from benchmarks.paper.run import main
 
 
 def test_pareto_front():
