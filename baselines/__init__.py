@@ -12,11 +12,14 @@ from ._ashikhmin_shirley import ashikhmin_shirley
 from ._blinn_phong import blinn_phong
 from ._common import BaselineModel, Transform
 from ._cook_torrance import cook_torrance
-from ._fit import BACKENDS, BaselineFit, BaselineStatus, fit, initial_guesses, residuals
+from ._fit import fit
 from ._lafortune import lafortune
 from ._lafortune_anisotropic import lafortune_anisotropic
 from ._oren_nayar import oren_nayar
 from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, get_model
+from ._result import BaselineFit, BaselineStatus
+from ._solvers import BACKENDS, residuals
+from ._starts import initial_guesses
 from ._ward import ward
 from ._ward_anisotropic import ward_anisotropic
 from ._ward_duer import ward_duer

@@ -218,3 +218,14 @@ def safe_pow(base, exponent):
 def schlick(f0, cos_d):
     """Schlick's Fresnel approximation ``F0 + (1 - F0)(1 - cos)^5``."""
     return f0 + (1.0 - f0) * (1.0 - cos_d) ** 5
+
+
+def diffuse_specular_columns(specular: Callable) -> Callable:
+    """``columns(nl, u, v)`` of a model ``rho_d / pi + rho_s specular(alpha, g)`` (Ward, Ward-Duer): the diffuse
+    column ``1 / pi`` and the specular lobe at ``alpha = nl[0]``, the two parameters that enter linearly."""
+
+    def columns(nl, u, v):
+        g = Geometry(u, v)
+        return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), specular(nl[0], g)], -1)
+
+    return columns

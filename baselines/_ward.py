@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
+from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, diffuse_specular_columns, grid, lobe, uniform_sampler
 
 
 def _specular(alpha, g):
@@ -33,18 +33,13 @@ def ward(params, u, v):
     return params[0] / jnp.pi + params[1] * _specular(params[2], Geometry(u, v))
 
 
-def _columns(nl, u, v):
-    g = Geometry(u, v)
-    return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), _specular(nl[0], g)], -1)
-
-
 MODEL = BaselineModel(
     name="ward",
     param_names=("rho_d", "rho_s", "alpha"),
     transforms=(POSITIVE, POSITIVE, LogBounded(1e-3, 3.0)),
     evaluate=ward,
     n_linear=2,
-    columns=_columns,
+    columns=diffuse_specular_columns(_specular),
     guesses=grid([0.3, 0.1, 0.6, 0.05, 0.2, 1.0]),
     sample=uniform_sampler([(0.02, 1.5, True)]),
     reference="Ward, SIGGRAPH 1992",

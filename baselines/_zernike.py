@@ -32,10 +32,11 @@ from __future__ import annotations
 import functools
 from math import factorial
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from polyjax import InputError
+from polyjax import InputError, Result, check_parameter_count, l2_error, weighted_lstsq
 
 
 @functools.lru_cache(maxsize=None)
@@ -118,3 +119,32 @@ def zernike(params, u, v):
     """
     order = _order_of(int(params.shape[-1]))
     return zernike_design(u, v, order) @ params
+
+
+@functools.partial(jax.jit, static_argnames=("order",))
+def _zernike_kernel(u, v, y, wl, wc2, *, order):
+    d = zernike_design(u, v, order)
+    sol = jax.vmap(lambda yb, wb: weighted_lstsq(d, yb, wb))(y, wc2)
+    coef = sol.coefficients
+    l2 = l2_error(y, coef @ d.T, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
+    no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
+    code = jnp.where(no_samples, Result.NO_SAMPLES, jnp.where(sol.rank < sol.n_active, Result.RANK_DEFICIENT, Result.OK))
+    code = code.astype(jnp.int32)
+    coef = jnp.where(no_samples[:, None], 0.0, coef)
+    zero = jnp.zeros(code.shape, jnp.int32)
+    return dict(
+        params=coef, raw=coef, l2=l2, status=code, steps=zero, success=code == Result.OK, start_l2=l2[:, None],
+        start_status=code[:, None], best_start=zero, at_limit=jnp.zeros(coef.shape, bool),
+    )
+
+
+def fit_zernike(u, v, y, wl, wc2, order) -> dict:
+    """Closed-form weighted least squares of the Zernike basis of ``order`` on every lane ``y (B, n)`` with the
+    weights ``wl``, ``wc2 (B, n)`` of equation (11); the fields of :class:`baselines.BaselineFit` as ``(B, ...)``
+    arrays. A lane whose weighted design has lower rank than its term count is ``RANK_DEFICIENT`` (minimum-norm
+    coefficients), as in the polynomial fit; a term count absurd for the data is refused up front
+    (:func:`polyjax.check_parameter_count`)."""
+    if not isinstance(order, (int, np.integer)) or order < 0:
+        raise InputError(f"order: expected a non-negative integer, found {order!r}")
+    check_parameter_count(f"order={int(order)} (Zernike)", n_zernike_terms(int(order)), y.shape[-1], y.dtype.itemsize)
+    return _zernike_kernel(u, v, y, wl, wc2, order=int(order))

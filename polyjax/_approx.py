@@ -21,8 +21,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._fit import _design_for
+from ._design import fitted_design
 from ._geometry import safe_normalize
+from ._linalg import svd
 from ._metrics import fit_weights
 from ._variables import get_variables
 
@@ -80,11 +81,11 @@ def approximation_error(
     w, wc2 = fit_weights(u, v, weights, None, cutoff_deg)
     used = w > 0
     x = get_variables(variables).fn(u, v)
-    _, _, _, z = _design_for(x, used, int(degree), basis, interactions)
+    _, _, _, z = fitted_design(x, used, int(degree), basis, interactions)
     ww = wc2 if weighted else used.astype(dtype)
     sw = jnp.sqrt(ww)
     a = z * sw[:, None]
-    uu, s, vt = jnp.linalg.svd(a, full_matrices=False)
+    uu, s, vt = svd(a)
     tol = jnp.finfo(dtype).eps * max(a.shape) * s[0]
     sinv = jnp.where(s > tol, 1.0 / jnp.where(s > tol, s, 1.0), 0.0)
     g = (z @ vt.T) * sinv  # rows z_i V S^+

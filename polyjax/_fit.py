@@ -10,75 +10,30 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._basis import BASES, design_matrix, n_terms, term_degrees
-from ._errors import FitError, InputError
-from ._geometry import safe_normalize
+from ._basis import BASES, n_terms, term_degrees
+from ._design import fitted_design
+from ._errors import InputError
+from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
 from ._lstsq import METHODS, weighted_lstsq
-from ._measurements import Measurements, check_samples
+from ._measurements import Measurements
 from ._metrics import fit_weights
-from ._model import FitStatus, PolynomialBRDF
-from ._pca import fit_pca
+from ._model import PolynomialBRDF
+from ._results import Result, raise_on_status
 from ._variables import get_variables
 
 
-def _is_tracer(x) -> bool:
-    return isinstance(x, jax.core.Tracer)
-
-
-def _design_for(x, keep, max_degree, basis, interactions):
-    """PCA of the kept samples, affine scaling, and the design matrix (equation (13)).
-
-    A component whose range over the kept samples is within rounding of ``x`` (``1e3 eps max|x|``;
-    e.g. Lafortune's ``X_1 + X_2 = 1`` when every sample has ``u = v``) carries no information,
-    only rounding noise that column equilibration would blow up into huge coefficients. Its
-    half-width is set to ``inf``: ``t = 0`` here and wherever the model is evaluated, so its
-    columns are constants and the fit is flagged rank-deficient (minimum-norm solution).
-    """
-    pca = fit_pca(x, keep)
-    z = pca(x)
-    k = x.shape[-1]
-    big = jnp.finfo(x.dtype).max
-    lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
-    hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
-    any_kept = jnp.any(keep)
-    lo = jnp.where(any_kept, lo, -1.0)
-    hi = jnp.where(any_kept, hi, 1.0)
-    hw = 0.5 * (hi - lo)
-    x_mag = jnp.max(jnp.where(keep[:, None], jnp.abs(x), 0.0))
-    flat = ~(hw > 1e3 * jnp.finfo(x.dtype).eps * x_mag)
-    if basis == "legendre":
-        centre = 0.5 * (lo + hi)
-    else:
-        centre = jnp.zeros((k,), x.dtype)
-        hw = jnp.ones((k,), x.dtype)
-    hw = jnp.where(flat, jnp.inf, hw)
-    d = design_matrix((z - centre) / hw, max_degree, basis, interactions)
-    return pca, centre, hw, d
-
-
 @functools.partial(
-    jax.jit,
-    static_argnames=(
-        "variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "shared", "flag_nonfinite",
-    ),
+    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg"),
 )
-def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, basis, interactions, method, rcond,
-                cutoff_deg, shared, flag_nonfinite=True):
-    """values (B, n); weights, mask (B or 1, n); degrees (D,) -> dict of (D, B, ...) arrays."""
+def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg):
+    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays."""
+    u, v, values = inp.u, inp.v, inp.values
     x = get_variables(variables).fn(u, v)
     k = x.shape[-1]
-    dtype = values.dtype
-    finite = jnp.isfinite(values)
-    if shared:  # one mask for every lane: a lane with NaN/inf cannot be masked alone, it is flagged
-        lane_bad = ~jnp.all(finite, axis=-1)
-    else:  # nonfinite="error" under an outer jit flags the lane whatever the mask; "mask" drops the samples
-        lane_bad = ~jnp.all(finite, axis=-1) & flag_nonfinite
-        mask = mask & finite
-    values = jnp.where(finite, values, 0.0)
-    w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)  # (B or 1, n)
+    w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
     tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
-    n_deg = degrees.shape[0]
+    n_deg, nb = degrees.shape[0], values.shape[0]
 
     def residual_l2(d, coef, y, wl, wc2l):  # coef (m,) ; y (n,)
         r = y - d @ coef
@@ -86,52 +41,52 @@ def _fit_kernel(u, v, values, weights, mask, degrees, *, variables, max_degree, 
         return jnp.where(den > 0, jnp.sqrt(jnp.sum(wc2l * r * r) / jnp.where(den > 0, den, 1.0)), jnp.inf)
 
     def lane(y, wl, wc2l):
-        """One set of samples (B_l right-hand sides sharing it) fitted for all degrees."""
+        """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
         keep = wl > 0
-        pca, centre, hw, d = _design_for(x, keep, max_degree, basis, interactions)
+        pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
         sol = jax.vmap(lambda a: weighted_lstsq(d, y.T, wc2l, a, method=method, rcond=rcond))(active)
         coef = jnp.swapaxes(sol.coefficients, 1, 2)  # (D, r, m)
-        l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l), in_axes=(0, 0)), in_axes=(0, None))(coef, y)
-        return pca, centre, hw, coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
+        l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
+        return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
-    if shared:
-        pca, centre, hw, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
-        nb = values.shape[0]
-        bc = lambda a: jnp.broadcast_to(a, (n_deg, nb) + a.shape)  # noqa: E731
-        out_pca = (bc(pca.mean), bc(pca.rotation), bc(centre), bc(hw))
-        rank = jnp.broadcast_to(rank[:, None], (n_deg, nb))
-        cond = jnp.broadcast_to(cond[:, None], (n_deg, nb))
-        n_act = jnp.broadcast_to(n_act[:, None], (n_deg, nb))
+    if inp.shared:  # one design, one factorisation, nb right-hand sides
+        tr, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+        tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
+        rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
     else:
-        res = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))(values, w, wc2)
-        pca, centre, hw, coef, l2, rank, cond, n_act, n_used = res
-        # lane returns (D, 1, ...) for coefficients / l2; move D first
-        coef = jnp.swapaxes(coef[:, :, 0], 0, 1)
-        l2 = jnp.swapaxes(l2[:, :, 0], 0, 1)
+        tr, coef, l2, rank, cond, n_act, n_used = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))(values, w, wc2)
+        coef, l2 = jnp.swapaxes(coef[:, :, 0], 0, 1), jnp.swapaxes(l2[:, :, 0], 0, 1)  # lane axis after degrees
         rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
-        bc = lambda a: jnp.broadcast_to(a[None], (n_deg,) + a.shape)  # noqa: E731
-        out_pca = (bc(pca.mean), bc(pca.rotation), bc(centre), bc(hw))
-        n_used = jnp.broadcast_to(n_used[None], (n_deg,) + n_used.shape)
-    bad = jnp.broadcast_to(lane_bad[None, :], (n_deg, values.shape[0]))
+        tr = tuple(jnp.broadcast_to(a[None], (n_deg,) + a.shape) for a in tr)
+        n_used = jnp.broadcast_to(n_used[None], (n_deg, nb))
+    bad = jnp.broadcast_to(inp.lane_bad[None, :], (n_deg, nb))
     status = jnp.where(
-        bad, FitStatus.NONFINITE_VALUES,
-        jnp.where(n_used == 0, FitStatus.NO_SAMPLES, jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)),
+        bad, Result.NONFINITE,
+        jnp.where(n_used == 0, Result.NO_SAMPLES,
+                  jnp.where(rank < n_act, Result.RANK_DEFICIENT, jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE))),
     ).astype(jnp.int32)
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
-    degs = jnp.broadcast_to(degrees[:, None], status.shape)
     return dict(
-        coefficients=coef.astype(dtype), degree=degs.astype(jnp.int32), mean=out_pca[0], rotation=out_pca[1],
-        centre=out_pca[2], halfwidth=out_pca[3], l2=l2, rank=rank, condition=cond, n_used=n_used.astype(jnp.int32),
-        status=status,
+        coefficients=coef.astype(values.dtype), degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
+        mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
+        n_used=n_used.astype(jnp.int32), status=status,
     )
 
 
-def _rows_equal(a: np.ndarray) -> bool:
-    flat = a.reshape(-1, a.shape[-1])
-    return bool(np.all(flat == flat[:1]))
+def _check_options(basis, method, rank_deficient, degree):
+    if basis not in BASES:
+        raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
+    if method not in METHODS:
+        raise InputError(f"method: expected one of {METHODS}, found {method!r}")
+    if rank_deficient not in ("flag", "error"):
+        raise InputError(f"rank_deficient: expected 'flag' or 'error', found {rank_deficient!r}")
+    degrees = np.atleast_1d(np.asarray(degree))
+    if degrees.ndim != 1 or degrees.size == 0 or not np.issubdtype(degrees.dtype, np.integer) or np.any(degrees < 0):
+        raise InputError(f"degree: expected a non-negative integer or a sequence of them, found {degree!r}")
+    return degrees
 
 
 def fit_polynomial(
@@ -150,6 +105,7 @@ def fit_polynomial(
     rcond: float | None = None,
     rank_deficient: str = "flag",
     nonfinite: str = "error",
+    throw: bool = False,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
 
@@ -158,6 +114,8 @@ def fit_polynomial(
     ``theta_v`` at most ``cutoff_deg``. The explanatory variables (section 3) are transformed to
     principal components over those samples, the design of equation (13) is built, and the
     solve is QR + SVD of the square-root-weighted design (:func:`polyjax.weighted_lstsq`).
+    Inputs follow the rules every fitter shares (``polyjax/_inputs.py``); the fit is differentiable and
+    batches under ``jit``/``vmap`` (``throw`` then raises through :func:`equinox.error_if`).
 
     Args:
         u: ``(n, 3)`` light directions, or a :class:`polyjax.Measurements` (then ``v``/``values``
@@ -171,7 +129,7 @@ def fit_polynomial(
            ``"lafortune-anisotropic"`` or a user's own.
         degree: ``p``, or a sequence of degrees: the result then has a leading degree axis.
         weights: solid-angle weights ``w_i`` (``(n,)`` or ``(*batch, n)``), ones by default.
-        mask: ``(*batch, n)`` validity mask; False samples are not fitted.
+        mask: ``(n,)`` (shared by every lane) or ``(*batch, n)`` validity mask; False samples are not fitted.
         cutoff_deg: grazing cutoff in degrees (80 in the paper); None keeps all samples above the horizon.
         basis: ``"legendre"`` (default, well conditioned) or ``"monomial"`` (the paper's literal powers);
            both span the same space and give the same fit.
@@ -179,131 +137,42 @@ def fit_polynomial(
         method: ``"qr"`` (default) or ``"svd"``.
         rcond: relative singular-value cutoff for the rank; default ``eps * max(m, sqrt(n))``.
         rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
-           (raise :class:`polyjax.FitError`). Lanes with no samples are always flagged ``NO_SAMPLES``
-           (L2 = inf) and raise under ``"error"``. Under an outer ``jit`` nothing can be raised: read ``status``.
-        nonfinite: ``"error"`` (raise on NaN/inf in ``values``; under an outer ``jit``, where nothing can be
-           raised, such a lane is flagged ``NONFINITE_VALUES`` with or without ``mask``) or ``"mask"``
+           (the same as ``throw=True``).
+        nonfinite: ``"error"`` (raise on NaN/inf in ``values`` where the mask is True; under an outer ``jit``,
+           where nothing can be raised before the fit, such a lane is flagged ``NONFINITE``) or ``"mask"``
            (drop those samples).
+        throw: raise :class:`polyjax.FitError` naming the first lane whose status is not ``OK``
+           (rank-deficient, no samples, non-finite values or L2); under ``jit`` an
+           :func:`equinox.error_if` error with that code's message. Lanes with no samples are always
+           ``NO_SAMPLES`` (L2 = inf); a lane whose L2 overflows is ``NONFINITE``.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
-        degree axis when ``degree`` is a sequence).
+        degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.Result` codes.
     """
-    if isinstance(u, Measurements):
-        data = u
-        if values is not None or (v is not None and not isinstance(v, str)):
-            raise InputError("fit_polynomial(measurements, ...): pass the other arguments by keyword")
-        if isinstance(v, str):
-            variables = v
-        u, v, values = data.u, data.v, data.values
-        weights = data.weights if weights is None else weights
-        mask = data.mask if mask is None else mask
-    if v is None or values is None:
-        raise InputError("fit_polynomial: expected u, v and values (or a Measurements)")
+    if isinstance(u, Measurements) and isinstance(v, str):
+        u, v, variables = u, None, v
     vs = get_variables(variables)
-    if basis not in BASES:
-        raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
-    if method not in METHODS:
-        raise InputError(f"method: expected one of {METHODS}, found {method!r}")
-    if rank_deficient not in ("flag", "error"):
-        raise InputError(f"rank_deficient: expected 'flag' or 'error', found {rank_deficient!r}")
-    if nonfinite not in ("error", "mask"):
-        raise InputError(f"nonfinite: expected 'error' or 'mask', found {nonfinite!r}")
-    if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
-        raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
-    scalar_degree = np.ndim(degree) == 0
-    degrees = np.atleast_1d(np.asarray(degree))
-    if degrees.ndim != 1 or degrees.size == 0 or not np.issubdtype(degrees.dtype, np.integer) or np.any(degrees < 0):
-        raise InputError(f"degree: expected a non-negative integer or a sequence of them, found {degree!r}")
+    degrees = _check_options(basis, method, rank_deficient, degree)
+    inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
     max_degree = int(degrees.max())
+    m = n_terms(vs.k, max_degree, bool(interactions))
+    check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
+                          inp.values.dtype.itemsize)
+    out = _fit_kernel(inp, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
+                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff)
+    scalar = np.ndim(degree) == 0
+    lead = () if scalar else (degrees.size,)
+    out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
+    model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
+                           max_degree=max_degree)
+    if throw or rank_deficient == "error":
+        def describe(i):
+            at = lambda a: int(np.asarray(a)[i] if np.ndim(a) else a)  # noqa: E731
+            return (f"rank {at(model.rank)} of {at(model.n_params)} parameters, {at(model.n_used)} samples used after "
+                    "the cutoff and mask")
 
-    values = jnp.asarray(values)
-    if jnp.issubdtype(values.dtype, jnp.complexfloating):
-        raise InputError(f"values: expected real BRDF values, found dtype {values.dtype}")
-    if not jnp.issubdtype(values.dtype, jnp.floating):
-        values = values.astype(jnp.result_type(float))
-    elif jnp.finfo(values.dtype).bits < 32:  # LAPACK has no half precision: float16/bfloat16 are fitted in float32
-        values = values.astype(jnp.float32)
-    dtype = values.dtype
-    u = jnp.asarray(u, dtype)
-    v = jnp.asarray(v, dtype)
-    batch = values.shape[:-1]
-    concrete = not any(_is_tracer(a) for a in (u, v, values, weights, mask))
-    n = check_samples(u, v, values, concrete=not (_is_tracer(u) or _is_tracer(v)))
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
-    dir_ok = ok_u & ok_v
-    m = jnp.broadcast_to(dir_ok, values.shape) if mask is None else jnp.broadcast_to(jnp.asarray(mask, bool) & dir_ok, values.shape)
-    if concrete:
-        finite = np.isfinite(np.asarray(values))
-        if not finite.all():
-            if nonfinite == "error":
-                bad = np.argwhere(~finite)[0]
-                raise InputError(
-                    f"values: expected finite numbers, found {int((~finite).sum())} NaN/inf "
-                    f"(first at index {tuple(int(i) for i in bad)}); pass nonfinite='mask' to drop them"
-                )
-    w = jnp.ones((n,), dtype) if weights is None else jnp.asarray(weights, dtype)
-    if w.shape[-1] != n or (w.ndim > 1 and w.shape != values.shape):
-        raise InputError(f"weights: expected shape ({n},) or {values.shape}, found {w.shape}")
-    if concrete and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
-        raise InputError("weights: expected finite, non-negative solid-angle weights")
-
-    nb = int(np.prod(batch)) if batch else 1
-    values2 = values.reshape(nb, n)
-    w2 = w.reshape(-1, n)
-    if mask is None and w2.shape[0] == 1 and (nonfinite == "error" or concrete):
-        # one set of samples for every lane: one design, one factorisation, nb right-hand sides
-        shared = True
-        m2 = dir_ok[None, :]
-    else:
-        m2 = m.reshape(nb, n)
-        if nonfinite == "mask":
-            m2 = m2 & jnp.isfinite(values2)
-        shared = False
-        if concrete and _rows_equal(np.asarray(m2)) and _rows_equal(np.asarray(w2)):
-            shared = True
-            m2, w2 = m2[:1], w2[:1]
-    if not shared:
-        w2 = jnp.broadcast_to(w2, (nb, n))
-    if shared and concrete and nonfinite == "mask" and not bool(jnp.all(jnp.isfinite(values2))):
-        shared = False
-        m2 = jnp.broadcast_to(m2, (nb, n)) & jnp.isfinite(values2)
-        w2 = jnp.broadcast_to(w2, (nb, n))
-
-    out = _fit_kernel(
-        u, v, values2, w2, m2, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-        interactions=bool(interactions), method=method, rcond=rcond,
-        cutoff_deg=None if cutoff_deg is None else float(cutoff_deg), shared=shared, flag_nonfinite=nonfinite == "error",
-    )
-    lead = (degrees.size,) if not scalar_degree else ()
-
-    def shape(a):
-        a = a.reshape((degrees.size,) + batch + a.shape[2:])
-        return a[0] if scalar_degree else a.reshape(lead + batch + a.shape[len(batch) + 1 :])
-
-    model = PolynomialBRDF(
-        **{key: shape(a) for key, a in out.items()}, variables=vs.name, basis=basis, interactions=bool(interactions),
-        max_degree=max_degree,
-    )
-    if rank_deficient == "error" and concrete:
-        status = np.asarray(model.status)
-        if np.any(status != FitStatus.OK):
-            bad = np.argwhere(status != FitStatus.OK)
-            first = tuple(int(i) for i in bad[0])
-            code = FitStatus(int(status[first] if status.ndim else status))
-            at = lambda a: int(np.asarray(a)[first] if np.ndim(a) else a)  # noqa: E731
-            what = {
-                FitStatus.NO_SAMPLES: "have no samples left to fit",
-                FitStatus.RANK_DEFICIENT: "are rank-deficient",
-                FitStatus.NONFINITE_VALUES: "have non-finite values",
-            }.get(code, f"ended with status {code.name}")
-            where = f"first at batch index {first}" if first else "the fit"
-            raise FitError(
-                f"fit_polynomial: {len(bad)} of {status.size} fits {what} ({where}: rank {at(model.rank)} of "
-                f"{at(model.n_params)} parameters, {at(model.n_used)} samples used after the cutoff and mask); "
-                "pass rank_deficient='flag' to get a minimum-norm solution and read model.status instead"
-            )
+        model = raise_on_status("fit_polynomial", model.status, model, describe)
     return model
 
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ._errors import InputError
 from ._geometry import cos_theta, cutoff_mask
 
 
@@ -32,6 +34,27 @@ def fit_weights(
         w = jnp.where(jnp.asarray(mask), w, 0.0)
     cu = jnp.where(keep, cos_theta(u), 0.0)
     return w, w * cu * cu
+
+
+def _check_l2_shapes(values, predicted, u_shape, v_shape, weights, mask) -> None:
+    """Shape errors of :func:`l2_error` named by argument (instead of a broadcasting error from JAX)."""
+    for name, shape in (("u", u_shape), ("v", v_shape)):
+        if len(shape) != 2 or shape[-1] != 3:
+            raise InputError(f"{name}: expected directions of shape (n, 3), found {tuple(shape)}")
+    if tuple(u_shape) != tuple(v_shape):
+        raise InputError(f"u and v: expected the same shape (n, 3), found {tuple(u_shape)} and {tuple(v_shape)}")
+    n = u_shape[0]
+    if values.ndim < 1 or values.shape[-1] != n:
+        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
+    for name, a in (("predicted", predicted), ("weights", weights), ("mask", mask)):
+        if a is None:
+            continue
+        shape = tuple(jnp.shape(a))
+        try:
+            np.broadcast_shapes(shape, values.shape)
+        except ValueError:
+            raise InputError(
+                f"{name}: expected a shape that broadcasts with values' {values.shape}, found {shape}") from None
 
 
 def l2_error(
@@ -64,6 +87,7 @@ def l2_error(
     """
     values = jnp.asarray(values)
     predicted = jnp.asarray(predicted)
+    _check_l2_shapes(values, predicted, jnp.shape(u), jnp.shape(v), weights, mask)
     w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)
     r = jnp.where(wc2 > 0, values - predicted, 0.0)
     num = jnp.sum(wc2 * r * r, axis=-1)

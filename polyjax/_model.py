@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import enum
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -11,21 +9,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._basis import design_matrix, exponents, n_terms
+from ._errors import InputError
 from ._geometry import safe_normalize
+from ._results import Result
 from ._variables import get_variables
 
 
-class FitStatus(enum.IntEnum):
-    """Result code of one fit (one lane of a batch)."""
-
-    OK = 0
-    #: the weighted design has lower numerical rank than parameters; the minimum-norm solution is returned
-    RANK_DEFICIENT = 1
-    #: no sample survived the cutoff and masks; coefficients are 0 and L2 is inf
-    NO_SAMPLES = 2
-    #: NaN/inf among the values of a lane fitted under an outer ``jit`` (where no Python error can be
-    #: raised); coefficients are 0 and L2 is inf. Concrete calls raise :class:`InputError` instead.
-    NONFINITE_VALUES = 3
+#: The result codes of a fit (an alias of :class:`polyjax.Result`, shared with every fitter).
+FitStatus = Result
 
 
 class PolynomialBRDF(eqx.Module):
@@ -46,7 +37,7 @@ class PolynomialBRDF(eqx.Module):
         l2: ``(*batch,)`` L2 error (equation (11)) on the fitted data.
         rank, condition: numerical rank and condition number of the weighted design.
         n_used: samples that entered the fit.
-        status: :class:`FitStatus` codes.
+        status: :class:`polyjax.Result` codes (``RESULTS`` has their messages).
         variables, basis, interactions, max_degree: static description of the model family.
     """
 
@@ -83,7 +74,7 @@ class PolynomialBRDF(eqx.Module):
     @property
     def ok(self) -> Array:
         """True for lanes whose fit has full rank and samples."""
-        return self.status == FitStatus.OK
+        return self.status == Result.OK
 
     def __getitem__(self, index) -> "PolynomialBRDF":
         """Select lanes of the batch (``model[3]``, ``model[:, 0]``)."""
@@ -107,8 +98,15 @@ class PolynomialBRDF(eqx.Module):
             direction. The polynomial itself is not clamped and can be negative.
         """
         dtype = self.coefficients.dtype
-        u, ok_u = safe_normalize(jnp.asarray(u, dtype))
-        v, ok_v = safe_normalize(jnp.asarray(v, dtype))
+        u, v = jnp.asarray(u, dtype), jnp.asarray(v, dtype)
+        if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
+            raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
+        try:
+            np.broadcast_shapes(u.shape, v.shape)
+        except ValueError:
+            raise InputError(f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
+        u, ok_u = safe_normalize(u)
+        v, ok_v = safe_normalize(v)
         u, v = jnp.broadcast_arrays(u, v)
         above = ok_u & ok_v & (u[..., 2] > 0) & (v[..., 2] > 0)
         x = get_variables(self.variables).fn(u, v)

@@ -1,0 +1,88 @@
+"""The result of :func:`baselines.fit`: :class:`BaselineFit`, evaluable at any directions."""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from polyjax import InputError, Result, safe_normalize
+
+from ._common import BaselineModel
+from ._registry import get_model
+
+
+#: The result codes of a baseline fit: an alias of :class:`polyjax.Result`, shared with every fitter.
+BaselineStatus = Result
+
+
+class BaselineFit(eqx.Module):
+    """Result of :func:`baselines.fit` for a batch of lanes (materials, channels).
+
+    Attributes:
+        params: ``(*batch, P)`` constrained (physical) parameters, see ``param_names``.
+        raw: ``(*batch, P)`` the unconstrained parameters the optimiser worked on.
+        l2: ``(*batch,)`` L2 of equation (11) (:func:`polyjax.l2_error`) of the kept start.
+        status: ``(*batch,)`` :class:`polyjax.Result` code of the kept start.
+        steps: ``(*batch,)`` solver steps of the kept start (both stages).
+        success: ``(*batch,)`` True when the kept start converged to a finite L2.
+        start_l2: ``(*batch, S)`` final L2 of every start (``inf`` for non-finite ones).
+        start_status: ``(*batch, S)`` code of every start.
+        best_start: ``(*batch,)`` index of the kept start.
+        at_limit: ``(*batch, P)`` True for a parameter on (within 0.01 in ``sin^2`` of) a limit of its
+            range (e.g. ``F0 = 1``, an exponent at its lower bound): the data asks for a value the
+            model's valid range excludes.
+        name: model name; ``backend``: solver used.
+    """
+
+    params: Float[Array, "*batch P"]
+    raw: Float[Array, "*batch P"]
+    l2: Float[Array, "*batch"]
+    status: Int[Array, "*batch"]
+    steps: Int[Array, "*batch"]
+    success: Bool[Array, "*batch"]
+    start_l2: Float[Array, "*batch S"]
+    start_status: Int[Array, "*batch S"]
+    best_start: Int[Array, "*batch"]
+    at_limit: Bool[Array, "*batch P"]
+    name: str = eqx.field(static=True)
+    backend: str = eqx.field(static=True, default="optimistix")
+
+    @property
+    def model(self) -> BaselineModel:
+        return get_model(self.name)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        if self.name == "zernike":
+            return tuple(f"c{j}" for j in range(self.params.shape[-1]))
+        return self.model.param_names
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return tuple(self.l2.shape)
+
+    def __call__(self, u, v) -> Float[Array, "*batch n"]:
+        """Evaluate every fitted lane at directions ``u, v`` ``(n, 3)``: returns ``(*batch, n)``.
+
+        Directions are renormalised, as :func:`fit` does with its inputs (so a non-unit ``u`` gives
+        the same value as ``u / |u|``); a zero vector has no direction and gives 0.
+        """
+        u = jnp.asarray(u, self.params.dtype)
+        v = jnp.asarray(v, self.params.dtype)
+        if u.ndim != 2 or u.shape[-1] != 3 or u.shape != v.shape:
+            raise InputError(f"u, v: expected two (n, 3) arrays of directions, found {u.shape} and {v.shape}")
+        return _evaluate_batch(self.name, self.params, u, v)
+
+
+@functools.partial(jax.jit, static_argnames=("name",))
+def _evaluate_batch(name, params, u, v):
+    model = get_model(name)
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    flat = params.reshape(-1, params.shape[-1])
+    out = jax.vmap(lambda p: jnp.where(ok_u & ok_v, model.evaluate(p, u, v), 0.0))(flat)
+    return out.reshape(params.shape[:-1] + (u.shape[0],))

@@ -1,0 +1,55 @@
+"""The design of a polynomial fit: PCA of the explanatory variables over the kept samples, the affine scaling of
+the components, and the basis columns of equation (3) (paper equation (13))."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from ._basis import design_matrix
+from ._pca import fit_pca
+
+
+def fitted_design(
+    x: Float[Array, "n k"], keep: Bool[Array, " n"], max_degree: int, basis: str = "legendre",
+    interactions: bool = False,
+):
+    """PCA of the kept samples, affine scaling, and the design matrix (equation (13)).
+
+    Args:
+        x: ``(n, k)`` explanatory variables (:func:`polyjax.explanatory_variables`).
+        keep: ``(n,)`` the samples the fit uses (the PCA and the scaling are taken over them).
+        max_degree: the polynomial degree ``p``.
+        basis, interactions: as in :func:`polyjax.fit_polynomial`.
+
+    Returns:
+        ``(pca, centre, halfwidth, design)``: the :class:`polyjax.PCA`, the ``(k,)`` affine scaling
+        ``t = (Z - centre) / halfwidth`` and the ``(n, m)`` design at every sample.
+
+
+    A component whose range over the kept samples is within rounding of ``x`` (``1e3 eps max|x|``;
+    e.g. Lafortune's ``X_1 + X_2 = 1`` when every sample has ``u = v``) carries no information,
+    only rounding noise that column equilibration would blow up into huge coefficients. Its
+    half-width is set to ``inf``: ``t = 0`` here and wherever the model is evaluated, so its
+    columns are constants and the fit is flagged rank-deficient (minimum-norm solution).
+    """
+    pca = fit_pca(x, keep)
+    z = pca(x)
+    k = x.shape[-1]
+    big = jnp.finfo(x.dtype).max
+    lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
+    hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
+    any_kept = jnp.any(keep)
+    lo = jnp.where(any_kept, lo, -1.0)
+    hi = jnp.where(any_kept, hi, 1.0)
+    hw = 0.5 * (hi - lo)
+    x_mag = jnp.max(jnp.where(keep[:, None], jnp.abs(x), 0.0))
+    flat = ~(hw > 1e3 * jnp.finfo(x.dtype).eps * x_mag)
+    if basis == "legendre":
+        centre = 0.5 * (lo + hi)
+    else:
+        centre = jnp.zeros((k,), x.dtype)
+        hw = jnp.ones((k,), x.dtype)
+    hw = jnp.where(flat, jnp.inf, hw)
+    d = design_matrix((z - centre) / hw, max_degree, basis, interactions)
+    return pca, centre, hw, d

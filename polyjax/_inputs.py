@@ -1,0 +1,205 @@
+"""One way in: the input preparation every fitter uses (polynomial, Zernike, nonlinear baselines).
+
+Rules, the same for every fitter and with the same messages:
+
+* ``u``, ``v``: ``(n, 3)`` directions, renormalised; a zero (or non-finite) vector has no direction and its sample
+  is dropped. ``values``: ``(*batch, n)``, samples last, ``n >= 1``.
+* dtype: the fit runs in the dtype of ``values``; integers and booleans become the default float, float16 and
+  bfloat16 float32 (LAPACK has no half precision); complex values are rejected.
+* ``weights``: ``(n,)`` (shared by every lane) or ``(*batch, n)``; finite and non-negative. ``mask``: ``(n,)``
+  (shared) or ``(*batch, n)``.
+* ``cutoff_deg`` in ``(0, 90]`` or None.
+* non-finite values where the mask is True: ``nonfinite="error"`` raises on concrete input and, where nothing can be
+  raised (under ``jit``), flags the lane (:attr:`PreparedInputs.lane_bad`, reported as ``NONFINITE``);
+  ``nonfinite="mask"`` drops those samples.
+* One set of samples for every lane (the shared-design path, one factorisation for all lanes) is chosen from the
+  shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``.
+
+Decisions use shapes and dtypes only; value checks (NaN, negative weights) run only on concrete arrays, so traced
+inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the host.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from ._errors import InputError
+from ._geometry import safe_normalize
+from ._measurements import Measurements
+from ._metrics import fit_weights
+
+NONFINITE = ("error", "mask")
+
+
+class PreparedInputs(eqx.Module):
+    """Validated, flattened inputs of a fit.
+
+    Attributes:
+        u, v: ``(n, 3)`` unit directions.
+        values: ``(B, n)`` values, ``B = prod(batch)``; non-finite entries replaced by 0 (they are masked or
+            their lane is flagged).
+        weights: ``(L, n)`` solid-angle weights, ``L = 1`` when shared by every lane, else ``B``.
+        mask: ``(L, n)`` samples to fit (directions valid, mask, finite values with ``nonfinite="mask"``).
+        lane_bad: ``(B,)`` lanes with NaN/inf values where the mask is True (only traced input gets here).
+        batch: the batch shape ``values.shape[:-1]``.
+        shared: True when ``L = 1``.
+    """
+
+    u: Float[Array, "n 3"]
+    v: Float[Array, "n 3"]
+    values: Float[Array, "B n"]
+    weights: Float[Array, "L n"]
+    mask: Bool[Array, "L n"]
+    lane_bad: Bool[Array, " B"]
+    batch: tuple[int, ...] = eqx.field(static=True)
+    shared: bool = eqx.field(static=True)
+
+    @property
+    def n(self) -> int:
+        return self.values.shape[-1]
+
+    def per_lane(self) -> tuple[Float[Array, "B n"], Bool[Array, "B n"]]:
+        """``weights`` and ``mask`` broadcast to one row per lane."""
+        shape = self.values.shape
+        return jnp.broadcast_to(self.weights, shape), jnp.broadcast_to(self.mask, shape)
+
+    def objective_weights(self, cutoff_deg) -> tuple[Float[Array, "B n"], Float[Array, "B n"]]:
+        """Per lane ``(w, w cos^2 theta_u)`` of equation (11) (:func:`polyjax.fit_weights`), 0 where not fitted."""
+        w, m = self.per_lane()
+        return fit_weights(self.u, self.v, w, m, cutoff_deg)
+
+
+def is_concrete(*xs) -> bool:
+    """True when no argument is a JAX tracer (``jit``/``grad``/``vmap`` hand tracers in)."""
+    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(xs))
+
+
+def unpack(caller: str, u, v, values, weights, mask):
+    """``(u, v, values, weights, mask)`` from arrays or a :class:`polyjax.Measurements` in ``u``."""
+    if isinstance(u, Measurements):
+        data = u
+        if v is not None or values is not None:
+            raise InputError(f"{caller}(measurements, ...): pass the other arguments by keyword")
+        u, v, values = data.u, data.v, data.values
+        weights = data.weights if weights is None else weights
+        mask = data.mask if mask is None else mask
+    if v is None or values is None:
+        raise InputError(f"{caller}: expected u, v and values (or a polyjax.Measurements)")
+    return u, v, values, weights, mask
+
+
+def fit_dtype(values) -> jnp.dtype:
+    """The dtype a fit of ``values`` runs in (see the module's rules)."""
+    dt = jnp.result_type(values)
+    if jnp.issubdtype(dt, jnp.complexfloating):
+        raise InputError(f"values: expected real BRDF values, found dtype {dt}")
+    if not jnp.issubdtype(dt, jnp.floating):
+        return jnp.result_type(float)
+    if jnp.finfo(dt).bits < 32:
+        return jnp.dtype(jnp.float32)
+    return dt
+
+
+def check_cutoff(cutoff_deg) -> float | None:
+    if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
+        raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
+    return None if cutoff_deg is None else float(cutoff_deg)
+
+
+def _lane_shape_error(name: str, found, n: int, batch) -> InputError:
+    want = f"({n},)" if not batch else f"({n},) or {tuple(batch) + (n,)}"
+    return InputError(f"{name}: expected shape {want} (samples last, n = len(u) = {n}), found {tuple(found)}")
+
+
+def _check_directions(u, v, concrete: bool) -> int:
+    for name, w in (("u", u), ("v", v)):
+        if w.ndim != 2 or w.shape[-1] != 3:
+            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
+        if concrete and not np.all(np.isfinite(np.asarray(w))):
+            raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
+    if u.shape != v.shape:
+        raise InputError(f"u and v: expected the same shape (n, 3), found {u.shape} and {v.shape}")
+    return u.shape[0]
+
+
+def _lane_array(name, a, n, batch, dtype):
+    """``weights``/``mask`` as ``(1, n)`` (shared) or ``(B, n)``; the shape rule of the module."""
+    a = jnp.asarray(a, dtype)
+    if a.shape == (n,):
+        return a[None]
+    if tuple(a.shape) == tuple(batch) + (n,):
+        return a.reshape(-1, n)
+    raise _lane_shape_error(name, a.shape, n, batch)
+
+
+def prepare_inputs(
+    caller: str, u, v, values, weights=None, mask=None, *, cutoff_deg=80.0, nonfinite: str = "error",
+) -> tuple[PreparedInputs, float | None]:
+    """Check and flatten a fit's inputs (see the module's rules); returns ``(PreparedInputs, cutoff_deg)``.
+
+    Raises :class:`polyjax.InputError` naming the argument, what was expected and what was found, before any
+    work is done.
+    """
+    u, v, values, weights, mask = unpack(caller, u, v, values, weights, mask)
+    if nonfinite not in NONFINITE:
+        raise InputError(f"nonfinite: expected one of {NONFINITE}, found {nonfinite!r}")
+    cutoff = check_cutoff(cutoff_deg)
+    dtype = fit_dtype(values)
+    values = jnp.asarray(values, dtype)
+    u = jnp.asarray(u, dtype)
+    v = jnp.asarray(v, dtype)
+    n = _check_directions(u, v, is_concrete(u, v))
+    if values.ndim < 1 or values.shape[-1] != n:
+        raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
+    if n == 0 or values.size == 0:
+        raise InputError(f"{caller}: empty input: expected at least one sample and one lane, found values of shape "
+                         f"{values.shape}")
+    batch = tuple(values.shape[:-1])
+    nb = int(np.prod(batch)) if batch else 1
+    y = values.reshape(nb, n)
+    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype)
+    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool)
+    if is_concrete(w) and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
+        raise InputError("weights: expected finite, non-negative solid-angle weights")
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    m = m & (ok_u & ok_v)[None]
+    finite = jnp.isfinite(y)
+    bad = m & ~finite  # (B, n)
+    if nonfinite == "error" and is_concrete(y, m) and bool(jnp.any(bad)):
+        where = np.argwhere(np.asarray(bad).reshape(values.shape))
+        raise InputError(
+            f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
+            f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
+        )
+    shared = w.shape[0] == 1 and m.shape[0] == 1 and (nonfinite == "error" or nb == 1)
+    if nonfinite == "mask":
+        m = m & finite
+        lane_bad = jnp.zeros((nb,), bool)
+    else:
+        lane_bad = jnp.any(bad, axis=-1)
+    if not shared:
+        w = jnp.broadcast_to(w, (nb, n))
+        m = jnp.broadcast_to(m, (nb, n))
+    y = jnp.where(finite, y, 0.0)
+    return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared), cutoff
+
+
+#: a design of more than this many bytes is refused up front (it would not fit in memory on common machines)
+MAX_DESIGN_BYTES = 4 * 2**30
+
+
+def check_parameter_count(what: str, n_params: int, n: int, itemsize: int = 8) -> None:
+    """Refuse absurd models before any work: more than ``max(8 n, 1000)`` parameters for ``n`` samples, or a
+    design (``n x n_params``) over :data:`MAX_DESIGN_BYTES`. ``what`` names the arguments that set the count."""
+    limit = max(8 * n, 1000)
+    size = n * n_params * itemsize
+    if n_params > limit or size > MAX_DESIGN_BYTES:
+        raise InputError(
+            f"{what}: expected at most {limit} parameters for {n} samples (8 per sample, at least 1000) and a "
+            f"design under {MAX_DESIGN_BYTES / 2**30:.0f} GiB, found {n_params} parameters ({size / 2**30:.3g} GiB)"
+        )
