@@ -26,7 +26,8 @@ def lafortune_anisotropic(params, u, v):
         ``f`` with the shape of ``u[..., 0]``; the lobe is 0 below the horizon.
     """
     g = Geometry(u, v)
-    base = params[1] * g.u[..., 0] * g.v[..., 0] + params[2] * g.u[..., 1] * g.v[..., 1] + params[3] * g.cu_raw * g.cv_raw
+    base = (params[1] * g.u[..., 0] * g.v[..., 0] + params[2] * g.u[..., 1] * g.v[..., 1]
+            + params[3] * g.cu_raw * g.cv_raw)
     return params[0] / jnp.pi + lobe(g, safe_pow(base, params[4]))
 
 

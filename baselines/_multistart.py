@@ -37,7 +37,10 @@ _LIMIT_ROUNDS = 2
 
 
 @functools.partial(
-    jax.jit, static_argnames=("name", "backend", "n_starts", "max_steps", "rtol", "atol", "stage_steps", "refine", "limit_steps")
+    jax.jit,
+    static_argnames=(
+        "name", "backend", "n_starts", "max_steps", "rtol", "atol", "stage_steps", "refine", "limit_steps",
+    ),
 )
 def fit_kernel(
     name, u, v, y, wl, wc2, key, raw0, *, backend, n_starts, max_steps, rtol, atol, stage_steps, refine, limit_steps
@@ -60,7 +63,8 @@ def fit_kernel(
         raw1, code1, steps1, sl21 = run_starts(model, backend, u, v, y, sw, scale, raw0, stage_steps, rtol, atol)
         order = jnp.argsort(sl21, axis=1)[:, :refine]  # (B, K)
         raw2, code2, steps2, sl22 = run_starts(
-            model, backend, u, v, y, sw, scale, take(raw1, order[..., None]), max(max_steps - stage_steps, 1), rtol, atol
+            model, backend, u, v, y, sw, scale, take(raw1, order[..., None]), max(max_steps - stage_steps, 1), rtol,
+            atol,
         )
         done = code1 == Result.OK
         raw, code, steps, sl2 = raw1, code1, steps1, sl21

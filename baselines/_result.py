@@ -14,7 +14,6 @@ from polyjax import InputError, Result, safe_normalize
 from ._common import BaselineModel
 from ._registry import get_model
 
-
 #: The result codes of a baseline fit: an alias of :class:`polyjax.Result`, shared with every fitter.
 BaselineStatus = Result
 

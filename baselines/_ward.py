@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, diffuse_specular_columns, grid, lobe, uniform_sampler
+from ._common import (
+    POSITIVE,
+    BaselineModel,
+    Geometry,
+    LogBounded,
+    diffuse_specular_columns,
+    grid,
+    lobe,
+    uniform_sampler,
+)
 
 
 def _specular(alpha, g):

@@ -17,8 +17,8 @@ def ward_anisotropic(params, u, v):
     r"""Anisotropic Ward BRDF:
 
     .. math::
-        f = \frac{\rho_d}{\pi} + \frac{\rho_s}{\sqrt{(n\cdot u)(n\cdot v)}}
-            \frac{\exp\!\big(-\tan^2\delta\,(\cos^2\phi_h/\alpha_x^2 + \sin^2\phi_h/\alpha_y^2)\big)}{4\pi\alpha_x\alpha_y},
+        f = \frac{\rho_d}{\pi} + \frac{\rho_s}{4\pi\alpha_x\alpha_y\sqrt{(n\cdot u)(n\cdot v)}}
+            \exp\!\big(-\tan^2\delta\,(\cos^2\phi_h/\alpha_x^2 + \sin^2\phi_h/\alpha_y^2)\big),
 
     computed as ``exp(-((h_x/alpha_x)^2 + (h_y/alpha_y)^2) / h_z^2)`` (no azimuth needed);
     ``x``, ``y`` are the principal directions of anisotropy.

@@ -128,8 +128,8 @@ def _zernike_kernel(u, v, y, wl, wc2, *, order):
     coef = sol.coefficients
     l2 = l2_error(y, coef @ d.T, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
     no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
-    code = jnp.where(no_samples, Result.NO_SAMPLES, jnp.where(sol.rank < sol.n_active, Result.RANK_DEFICIENT, Result.OK))
-    code = code.astype(jnp.int32)
+    code = jnp.where(sol.rank < sol.n_active, Result.RANK_DEFICIENT, Result.OK)  # as in the polynomial fit
+    code = jnp.where(no_samples, Result.NO_SAMPLES, code).astype(jnp.int32)
     coef = jnp.where(no_samples[:, None], 0.0, coef)
     zero = jnp.zeros(code.shape, jnp.int32)
     return dict(

@@ -7,33 +7,41 @@ least squares. Enable float64 in your entry point (``jax.config.update("jax_enab
 for fitting; polyjax does not change global JAX settings on import.
 """
 
-from . import data
-from . import render
+from . import data, render
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
 from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
 from ._fit import fit_polynomial, n_parameters
-from ._geometry import cartesian_to_spherical, cos_theta, cutoff_mask, half_vector, reflect, safe_normalize, spherical_to_cartesian
+from ._geometry import (
+    cartesian_to_spherical,
+    cos_theta,
+    cutoff_mask,
+    half_vector,
+    reflect,
+    safe_normalize,
+    spherical_to_cartesian,
+)
 from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._io import load_model, save_model
 from ._lstsq import LstsqSolution, weighted_lstsq
 from ._measurements import Measurements, check_samples, make_measurements
 from ._metrics import fit_weights, l2_error, psnr
 from ._model import FitStatus, PolynomialBRDF, evaluate_paper_form
-from ._results import RESULTS, Result, raise_on_status
 from ._pca import PCA, fit_pca
+from ._results import RESULTS, Result, raise_on_status
 from ._variables import VariableSet, explanatory_variables, get_variables, register_variables, variable_sets
 
 __version__ = "0.1.0"
 
 __all__ = [
     "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
-    "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs", "RESULTS", "Result", "UnknownNameError", "VariableSet",
-    "approximation_error", "cartesian_to_spherical", "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fitted_design", "fit_polynomial", "fit_weights",
-    "get_variables", "half_vector", "has_data_root", "is_concrete", "l2_error", "load_model", "make_measurements", "n_parameters",
-    "n_terms", "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_variables", "safe_normalize", "save_model", "spherical_to_cartesian",
-    "variable_sets", "weighted_lstsq",
+    "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs", "RESULTS", "Result",
+    "UnknownNameError", "VariableSet", "approximation_error", "cartesian_to_spherical", "check_parameter_count",
+    "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix", "evaluate_paper_form",
+    "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights", "fitted_design",
+    "get_variables", "half_vector", "has_data_root", "is_concrete", "l2_error", "load_model", "make_measurements",
+    "n_parameters", "n_terms", "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_variables", "render",
+    "safe_normalize", "save_model", "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
 ]

@@ -55,22 +55,23 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
     else:
-        tr, coef, l2, rank, cond, n_act, n_used = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))(values, w, wc2)
+        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))
+        tr, coef, l2, rank, cond, n_act, n_used = per_lane(values, w, wc2)
         coef, l2 = jnp.swapaxes(coef[:, :, 0], 0, 1), jnp.swapaxes(l2[:, :, 0], 0, 1)  # lane axis after degrees
         rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
         tr = tuple(jnp.broadcast_to(a[None], (n_deg,) + a.shape) for a in tr)
         n_used = jnp.broadcast_to(n_used[None], (n_deg, nb))
     bad = jnp.broadcast_to(inp.lane_bad[None, :], (n_deg, nb))
-    status = jnp.where(
-        bad, Result.NONFINITE,
-        jnp.where(n_used == 0, Result.NO_SAMPLES,
-                  jnp.where(rank < n_act, Result.RANK_DEFICIENT, jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE))),
-    ).astype(jnp.int32)
+    status = jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE)  # an overflowing L2 is not OK
+    status = jnp.where(rank < n_act, Result.RANK_DEFICIENT, status)
+    status = jnp.where(n_used == 0, Result.NO_SAMPLES, status)
+    status = jnp.where(bad, Result.NONFINITE, status).astype(jnp.int32)
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
     return dict(
-        coefficients=coef.astype(values.dtype), degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
+        coefficients=coef.astype(values.dtype),
+        degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
         mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
         n_used=n_used.astype(jnp.int32), status=status,
     )
@@ -154,7 +155,8 @@ def fit_polynomial(
         u, v, variables = u, None, v
     vs = get_variables(variables)
     degrees = _check_options(basis, method, rank_deficient, degree)
-    inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
+    inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg,
+                                 nonfinite=nonfinite)
     max_degree = int(degrees.max())
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,

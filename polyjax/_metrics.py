@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ._errors import InputError
 from ._geometry import cos_theta, cutoff_mask
@@ -96,7 +95,9 @@ def l2_error(
     return jnp.where(den > 0, jnp.sqrt(num / jnp.where(den > 0, den, 1.0)), jnp.inf)
 
 
-def psnr(image: ArrayLike, reference: ArrayLike, peak: float | None = None, mask: ArrayLike | None = None) -> Float[Array, ""]:
+def psnr(
+    image: ArrayLike, reference: ArrayLike, peak: float | None = None, mask: ArrayLike | None = None,
+) -> Float[Array, ""]:
     r"""Peak signal-to-noise ratio in dB, ``10 log10(peak^2 / MSE)``.
 
     Args:
@@ -109,7 +110,8 @@ def psnr(image: ArrayLike, reference: ArrayLike, peak: float | None = None, mask
     """
     a = jnp.asarray(image)
     b = jnp.asarray(reference)
-    m = jnp.ones(jnp.broadcast_shapes(a.shape, b.shape), bool) if mask is None else jnp.broadcast_to(jnp.asarray(mask), jnp.broadcast_shapes(a.shape, b.shape))
+    shape = jnp.broadcast_shapes(a.shape, b.shape)
+    m = jnp.ones(shape, bool) if mask is None else jnp.broadcast_to(jnp.asarray(mask), shape)
     d = jnp.where(m, a - b, 0.0)
     mse = jnp.sum(d * d) / jnp.maximum(jnp.sum(m), 1)
     p = jnp.max(jnp.where(m, b, -jnp.inf)) if peak is None else jnp.asarray(peak, dtype=d.dtype)

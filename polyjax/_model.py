@@ -14,7 +14,6 @@ from ._geometry import safe_normalize
 from ._results import Result
 from ._variables import get_variables
 
-
 #: The result codes of a fit (an alias of :class:`polyjax.Result`, shared with every fitter).
 FitStatus = Result
 
@@ -104,7 +103,8 @@ class PolynomialBRDF(eqx.Module):
         try:
             np.broadcast_shapes(u.shape, v.shape)
         except ValueError:
-            raise InputError(f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
+            raise InputError(
+                f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
         u, ok_u = safe_normalize(u)
         v, ok_v = safe_normalize(v)
         u, v = jnp.broadcast_arrays(u, v)

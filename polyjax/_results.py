@@ -58,7 +58,8 @@ def message(code: int) -> str:
 
 
 _WHAT = {
-    Result.OK: "succeeded", Result.RANK_DEFICIENT: "are rank-deficient", Result.NO_SAMPLES: "have no samples left to fit",
+    Result.OK: "succeeded", Result.RANK_DEFICIENT: "are rank-deficient",
+    Result.NO_SAMPLES: "have no samples left to fit",
     Result.NONFINITE: "have non-finite values, L2 or solution", Result.MAX_STEPS: "reached the step limit",
     Result.FAILED: "failed",
 }

@@ -7,9 +7,9 @@ import pytest
 
 import baselines as bl
 import polyjax as pj
+from benchmarks.paper.references import scipy_best_l2
 
 from _baseline_problems import TRUE_PARAMS, synthetic_geometry
-from benchmarks.paper.references import scipy_best_l2
 
 NONLINEAR = list(TRUE_PARAMS)
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-
-from _problems import SYMMETRIC_SETS, VARIABLE_SETS, curet, polynomial_data, random_hemisphere
 from benchmarks.paper.constants import PAPER_TABLE1
 from benchmarks.paper.references import numpy_reference_fit
+
+from _problems import SYMMETRIC_SETS, VARIABLE_SETS, curet, polynomial_data, random_hemisphere
 
 PAPER_TABLE1_QUARRY = PAPER_TABLE1["Quarry Tile"]
 

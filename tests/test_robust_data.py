@@ -77,7 +77,8 @@ def test_nan_and_inf_inside_values_error_names_the_argument_or_are_masked(proble
     np.testing.assert_array_equal(np.asarray(m.n_used), [60, 59, 59])
     ref = pj.fit_polynomial(np.delete(u, 7, 0), np.delete(v, 7, 0), np.delete(b, 7), degree=3)
     np.testing.assert_allclose(float(m.l2[1]), float(ref.l2), rtol=1e-10)
-    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 2 NaN/inf \(first at index \(1, 7\)\) where mask is True"):
+    msg = r"values: expected finite numbers, found 2 NaN/inf \(first at index \(1, 7\)\) where mask is True"
+    with pytest.raises(pj.InputError, match=msg):
         bl.fit("ward", u, v, vals)
     mask = np.isfinite(vals)
     f = bl.fit("ward", u, v, vals, mask=mask, n_starts=2)

@@ -153,17 +153,17 @@ def curet_fits(s: Settings, d: pj.Measurements, step=_no_step) -> dict:
     key = jax.random.PRNGKey(s.seed)
     out = {}
     for name in s.nonlinear:
-        f, first, best = timed(lambda: baselines.fit(name, d, n_starts=s.n_starts, key=key), s.repeats)
+        f, first, best = timed(lambda name=name: baselines.fit(name, d, n_starts=s.n_starts, key=key), s.repeats)
         out[name] = _record(f.l2, first, best, nm, f, extra={"converged": int(np.asarray(f.success).sum())})
         step(f"CUReT {name}")
     for key_, order in (("zernike", 8), ("zernike2", 2)):
-        f, first, best = timed(lambda: baselines.fit("zernike", d, order=order), s.repeats)
+        f, first, best = timed(lambda order=order: baselines.fit("zernike", d, order=order), s.repeats)
         out[key_] = _record(f.l2, first, best, nm, f)
     step("CUReT Zernike")
     configs = poly_configs(s.degrees, CURET_POLY + FIG7_POLY)
     for var in VARIABLE_SETS:
         for p in (p for v, p in configs if v == var):
-            m, first, best = timed(lambda: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
+            m, first, best = timed(lambda var=var, p=p: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
             out[poly_key(var, p)] = _record(m.l2, first, best, nm, m,
                                             extra={"n_params": int(np.asarray(m.n_params).ravel()[0])})
         step(f"CUReT poly {var}")
@@ -176,7 +176,7 @@ def merl_fits(s: Settings, d: pj.Measurements, d_fit: pj.Measurements, step=_no_
     key = jax.random.PRNGKey(s.seed)
     out = {}
     for name in s.nonlinear:
-        f, first, best = timed(lambda: baselines.fit(name, d_fit, n_starts=s.n_starts, key=key), s.repeats)
+        f, first, best = timed(lambda name=name: baselines.fit(name, d_fit, n_starts=s.n_starts, key=key), s.repeats)
         pred = f(d.u, d.v)
         l2 = pj.l2_error(d.values, pred, d.u, d.v, weights=d.weights, mask=d.mask)  # (m, 3) on the eval grid
         out[name] = _record(l2, first, best, nm, f, extra={"l2_on_fit_subsample": np.asarray(f.l2).tolist()})
@@ -184,7 +184,7 @@ def merl_fits(s: Settings, d: pj.Measurements, d_fit: pj.Measurements, step=_no_
     configs = poly_configs(s.degrees, MERL_POLY)
     for var in VARIABLE_SETS:
         for p in (p for v, p in configs if v == var):
-            m, first, best = timed(lambda: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
+            m, first, best = timed(lambda var=var, p=p: pj.fit_polynomial(d, variables=var, degree=p), s.repeats)
             out[poly_key(var, p)] = _record(m.l2, first, best, nm, m)
         step(f"MERL poly {var}")
     return out

@@ -89,7 +89,8 @@ def figs_67(s: Settings, curet: pj.Measurements, c: dict, out: Path) -> dict:
     order = np.argsort(np.asarray(c[poly_key(*FIG7_POLY[1])]["l2"]))
     curves = []
     for k in keys:
-        npar = f" ({c[k]['n_params']} par.)" if "n_params" in c[k] else (" (55 par.)" if k == "zernike" else " (5 par.)")
+        npar = c[k]["n_params"] if "n_params" in c[k] else (55 if k == "zernike" else 5)
+        npar = f" ({npar} par.)"
         curves.append((label(k) + npar, np.asarray(c[k]["l2"])[order], "-o"))
     _l2_plot(out / "fig7_linear_models.png", [names[i] for i in order], curves,
              "Fig. 7: linear models, sorted by Poly. (Lafortune, p = 8)")

@@ -120,8 +120,8 @@ def scipy_best_l2(name: str, u, v, values, starts, *, weights=None, mask=None, c
         yb, sb = y[b], sw2[b]
         for st in s0[b]:
             try:
-                sol = least_squares(lambda r: np.asarray(res(r, yb, sb)), st,
-                                    jac=lambda r: np.asarray(jac(r, yb, sb)), method="lm")
+                sol = least_squares(lambda r, yb=yb, sb=sb: np.asarray(res(r, yb, sb)), st,
+                                    jac=lambda r, yb=yb, sb=sb: np.asarray(jac(r, yb, sb)), method="lm")
             except Exception:  # noqa: BLE001 - a failed start is skipped, as in the batched fit
                 continue
             cost = float(np.sqrt(np.sum(sol.fun**2)))

@@ -36,7 +36,8 @@ from .report import machine, strip, versions, write_tables
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python benchmarks/reproduce.py", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="results", help="results folder (created; default ./results)")
-    ap.add_argument("--quick", action="store_true", help="a few materials, 2 nonlinear models, few starts, tiny renders")
+    ap.add_argument("--quick", action="store_true",
+                    help="a few materials, 2 nonlinear models, few starts, tiny renders")
     ap.add_argument("--data-root", default=None, help="measured data folder (default: $POLYJAX_DATA)")
     return ap
 
