@@ -45,6 +45,12 @@ _LIMIT_ROUNDS = 2
 def fit_kernel(
     name, u, v, y, wl, wc2, key, raw0, *, backend, n_starts, max_steps, rtol, atol, stage_steps, refine, limit_steps
 ):
+    """Every start of every lane ``y (B, n)``: stage 1 (``stage_steps``), stage 2 (the ``refine`` best to
+    convergence), the pick of the best start, and up to two range-limit rounds; a dict of ``(B, ...)`` arrays.
+
+    One jitted function (longer than the project's usual 80 lines) so that the stages, the pick and the
+    range-limit rounds compile into one program; each stage is a call of :func:`run_starts`.
+    """
     model = get_model(name)
     den = jnp.sum(wl, axis=-1, keepdims=True)
     sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
