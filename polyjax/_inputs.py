@@ -13,7 +13,9 @@ Rules, the same for every fitter and with the same messages:
   raised (under ``jit``), flags the lane (:attr:`PreparedInputs.lane_bad`, reported as ``NONFINITE``);
   ``nonfinite="mask"`` drops those samples.
 * One set of samples for every lane (the shared-design path, one factorisation for all lanes) is chosen from the
-  shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``.
+  shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``. The one exception is the
+  mask of a :class:`polyjax.Measurements` built by a loader, ``(*batch, n)`` today: when concrete and equal on
+  every lane it is taken as its ``(n,)`` row (the loaders should return ``(n,)`` masks; then this goes).
 
 Decisions use shapes and dtypes only; value checks (NaN, negative weights) run only on concrete arrays, so traced
 inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the host.
@@ -86,10 +88,21 @@ def unpack(caller: str, u, v, values, weights, mask):
             raise InputError(f"{caller}(measurements, ...): pass the other arguments by keyword")
         u, v, values = data.u, data.v, data.values
         weights = data.weights if weights is None else weights
-        mask = data.mask if mask is None else mask
+        mask = _loader_mask(data.mask) if mask is None else mask
     if v is None or values is None:
         raise InputError(f"{caller}: expected u, v and values (or a polyjax.Measurements)")
     return u, v, values, weights, mask
+
+
+def _loader_mask(mask):
+    """A :class:`polyjax.Measurements` mask as the loaders build it, ``(*batch, n)``: when it is concrete and the
+    same on every lane (CUReT, Cornell, MERL: the valid samples are a property of the geometry), its ``(n,)`` row,
+    so the fit takes the shared-design path. The loaders' data are concrete; a traced mask is kept per lane.
+    """
+    if mask is None or jnp.ndim(mask) < 2 or not is_concrete(mask):
+        return mask
+    flat = np.asarray(mask).reshape(-1, np.shape(mask)[-1])
+    return flat[0] if bool(np.all(flat == flat[:1])) else mask
 
 
 def fit_dtype(values) -> jnp.dtype:
