@@ -20,10 +20,11 @@ from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, get_model
 from ._ward import ward
 from ._ward_anisotropic import ward_anisotropic
 from ._ward_duer import ward_duer
+from ._saving import KIND as SAVED_MODEL_KIND
 from ._zernike import disk_point, n_zernike_terms, zernike, zernike_design, zernike_terms
 
 __all__ = [
-    "BACKENDS", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS", "PAPER_MODELS",
+    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS", "PAPER_MODELS",
     "Transform", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit", "get_model",
     "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms", "oren_nayar", "residuals", "ward",
     "ward_anisotropic", "ward_duer", "zernike", "zernike_design", "zernike_terms",
