@@ -18,7 +18,8 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from importlib import metadata
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -93,7 +94,7 @@ def _load_entry_points() -> None:
         _LOADED_ENTRY_POINTS.add(key)
         try:
             obj = ep.load()
-        except Exception as e:  # a broken provider must not break the others
+        except Exception as e:  # noqa: BLE001  (a broken provider must not break the others)
             warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: {e}",
                           stacklevel=3)
             continue

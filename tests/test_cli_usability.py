@@ -1,15 +1,13 @@
 """What a new user of the command line ran into: lane labels, data roots, output paths, flags, warnings."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from _data_problems import SMALL_RES, write_astm, write_small_merl
 
 import polyjax as pj
 from polyjax._cli import build_parser, main
-
-from _data_problems import SMALL_RES, write_astm, write_small_merl
 
 
 @pytest.fixture()
