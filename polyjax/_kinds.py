@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from importlib import metadata
 from collections.abc import Callable
+from importlib import metadata
 from typing import Any
 
 import jax.numpy as jnp
