@@ -449,7 +449,7 @@ class Run:
         # Table 3 PSNR: measured (neural network) vs every model, one sphere per material
         t3_keys = list(s.nonlinear) + [poly_key(v, p) for v, p in MERL_POLY]
         names = list(s.merl_names)
-        refs = [pj.data.load_nbrdf(n, self.root) for n in names]
+        refs = [pj.data.load_nbrdf(n, root=self.root) for n in names]
         rows = [refs] + [[self._brdf(m[k]["_fit"], k, j) for j in range(len(names))] for k in t3_keys]
         g = pr.render_grid(rows, scene)
         images = np.asarray(g.images, np.float32)

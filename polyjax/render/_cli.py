@@ -61,7 +61,7 @@ def _reference(spec: str, m, k: int, root):
     kind, _, _ = spec.partition(":")
     if kind.strip().lower() == "merl-nbrdf" and hasattr(pj.data, "load_nbrdf"):
         names = list(m.names) if m.names else [spec.partition(":")[2]]
-        return pj.data.load_nbrdf(names[k], root)
+        return pj.data.load_nbrdf(names[k], root=root)
     has_channels = bool(m.axes) and m.axes[-1] == "channel"
     vals = np.asarray(m.values)
     keep = np.ones(vals.shape, bool) if m.mask is None else np.broadcast_to(np.asarray(m.mask), vals.shape)
