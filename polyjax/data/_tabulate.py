@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import jax.numpy as jnp
-import numpy as np
 
 from .._errors import InputError
 from .._geometry import safe_normalize
