@@ -104,7 +104,9 @@ def cmd_fit(args) -> int:
     if polynomial:
         beta = model.paper_coefficients() if not args.interactions else np.asarray(model.coefficients)
         form = "paper eq. (3): beta_0, then Z_1..Z_k, Z_1^2..Z_k^2, ..." if not args.interactions else "basis"
-        n_params = int(np.asarray(model.n_params).ravel()[0])
+        n_par = np.asarray(model.n_params)
+        n_params = [int(n_par[i].ravel()[0]) for i in range(len(degrees))] if isinstance(degree, list) \
+            else int(n_par.ravel()[0])
     else:
         beta = np.asarray(model.params)
         form = "parameters: " + ", ".join(model.param_names)
@@ -155,7 +157,8 @@ def cmd_fit(args) -> int:
         print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
     print(f"data: {data.source}")
     if polynomial:
-        print(f"model: polynomial, variables={model.variables}, p={args.degree}, {n_params} parameters, "
+        counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
+        print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
               f"basis={args.basis}")
     else:
         print(f"model: {model_name}, {n_params} parameters ({', '.join(model.param_names)})")

@@ -150,3 +150,13 @@ def test_fit_report_warns_when_fit_barely_beats_zero(tmp_path, capsys):
     ratio = np.asarray(js["l2"]) / np.asarray(js["l2_zero_model"])
     assert np.all(ratio[0] > 0.95) and np.all(ratio[1] < 0.8)
     assert len(js["warnings"]) == 1
+
+
+@pytest.mark.data
+def test_fit_report_warns_on_cornell_cayman(capsys, data_root):
+    """Cayman's narrow peak: the Lafortune polynomial removes < 0.1% of the zero model's L2 at p = 1 (2.812 vs 2.814)."""
+    assert main(["fit", "--data-root", str(data_root), "--dataset", "cornell:cayman", "--degree", "1", "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    ratio = np.asarray(js["l2"]) / np.asarray(js["l2_zero_model"])
+    assert np.all(ratio > 0.99) and np.all(ratio < 1.0)
+    assert len(js["warnings"]) == 1 and "cayman R" in js["warnings"][0]

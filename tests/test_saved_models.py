@@ -202,3 +202,12 @@ def test_render_cli_renders_a_saved_baseline_fit(tmp_path, capsys, ward_fit, rgb
     assert "rows: ward; columns: paint" in capsys.readouterr().out
     img = pr.read_exr(out.with_suffix(".exr"))
     assert np.asarray(img).max() > 0 and np.asarray(img).min() >= 0
+
+
+def test_render_cli_model_flag_takes_a_baseline_name_like_fit(tmp_path, capsys, rgb_data):
+    out = tmp_path / "img"
+    assert main(["render", "--model", "ward", "--dataset", f"merl:{rgb_data[0]}", "--size", "8", "--out", str(out)]) == 0
+    assert "rows: ward; columns: paint" in capsys.readouterr().out
+    assert main(["render", "--model", "nope", "--dataset", f"merl:{rgb_data[0]}", "--size", "8",
+                 "--out", str(out)]) == 2
+    assert "cook-torrance" in capsys.readouterr().err
