@@ -23,8 +23,9 @@ def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     r.add_argument("--degrees", "--degree", dest="degrees", default="5",
                    help="polynomial degree, or comma-separated degrees: one grid row each (default 5)")
     r.add_argument("--model", default=None,
-                   help="render a saved model (polyjax.save_model: polynomial or baseline fit) instead of fitting; "
-                   "it must hold as many materials as --dataset")
+                   help="a saved model file (.npz/.json of polyjax.save_model: polynomial or baseline fit; it must "
+                   "hold as many materials as --dataset), or a baseline model name as in `fit --model` (e.g. "
+                   "cook-torrance) fitted to --dataset; rendered instead of the polynomial degrees")
     r.add_argument("--reference", action="store_true", help="add the measured data as the first row, and PSNR")
     r.add_argument("--light", default="point",
                    help="point | directional | sky (procedural environment) | path to a lat-long .exr map")
@@ -116,14 +117,23 @@ def run_render(args) -> int:
         flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), model)
         return [rgb_brdf(jax.tree.map(lambda a, k=k: a[k], flat)) for k in range(n_mat)]
 
-    saved = lanes(pj.load_model(args.model)) if args.model else None
+    saved = None
+    if args.model and args.model.strip().lower() != "polynomial":
+        from .._kinds import fitter_for
+
+        is_file = Path(args.model).suffix in (".npz", ".json") or Path(args.model).exists()
+        if is_file:
+            saved = lanes(pj.load_model(args.model))
+        else:
+            kind, model_name = fitter_for(args.model)
+            saved = lanes(kind.fit(model_name, m))
     rows, row_names = [], []
     if args.reference:
         rows.append([_reference(spec, m, k, root) for k in range(n_mat)])
         row_names.append("measured")
     if saved is not None:
         rows.append(saved)
-        row_names.append(Path(args.model).stem)
+        row_names.append(Path(args.model).stem if is_file else model_name)
     else:
         for p in degrees:
             model = pj.fit_polynomial(m, variables=args.variables, degree=p)
