@@ -18,6 +18,7 @@ from ._lafortune_anisotropic import lafortune_anisotropic
 from ._oren_nayar import oren_nayar
 from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, get_model
 from ._result import BaselineFit, BaselineStatus
+from ._saving import KIND as SAVED_MODEL_KIND
 from ._solvers import BACKENDS, residuals
 from ._starts import initial_guesses
 from ._ward import ward
@@ -26,7 +27,8 @@ from ._ward_duer import ward_duer
 from ._zernike import disk_point, n_zernike_terms, zernike, zernike_design, zernike_terms
 
 __all__ = [
-    "BACKENDS", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS", "PAPER_MODELS",
+    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS",
+    "PAPER_MODELS",
     "Transform", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit", "get_model",
     "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms", "oren_nayar", "residuals", "ward",
     "ward_anisotropic", "ward_duer", "zernike", "zernike_design", "zernike_terms",

@@ -18,14 +18,58 @@ def _x64() -> None:
 
 
 def _load_dataset(args):
-    """Measurements from --dataset / --sample, or the synthetic default without a data root."""
+    """Measurements from --dataset / --sample, or the synthetic default when no data root is configured at all.
+
+    A data root that is given (``--data-root`` or ``$POLYJAX_DATA``) but does not exist is an error.
+    """
     import polyjax as pj
+
+    from ._config import configured_data_root
 
     if args.dataset:
         return pj.data.load(args.dataset, root=args.data_root), False
-    if pj.has_data_root(args.data_root):
+    if configured_data_root(args.data_root) is not None:
         return pj.data.load_curet(args.data_root, [args.sample]), False
     return pj.data.synthetic_default(), True
+
+
+def _parse_degrees(text, flag: str = "--degree") -> list[int]:
+    """``"7"`` or ``"2,3,5"`` -> a list of non-negative integers; InputError naming ``flag`` otherwise."""
+    from ._errors import InputError
+
+    try:
+        degrees = [int(d) for d in str(text).split(",") if d.strip()]
+    except ValueError:
+        degrees = []
+    if not degrees or min(degrees) < 0:
+        raise InputError(f"{flag}: expected a degree or comma-separated degrees (e.g. 5 or 2,3,5), found {text!r}")
+    return degrees
+
+
+def _lane_labels(data, lead: list[str] | None = None) -> list[str]:
+    """One label per fitted lane, in C order over (leading labels, data batch axes): e.g. ``"p=2 alpha R"``.
+
+    A material axis is labelled by ``data.names``, a channel axis by ``data.channels``; data without a material
+    axis that names its one material (a single file) gets that name in front.
+    """
+    import itertools
+
+    per_axis = [lead] if lead else []
+    for i, size in enumerate(data.batch_shape):
+        axis = data.axes[i] if i < len(data.axes) else ""
+        if axis == "material" and len(data.names) == size:
+            per_axis.append(list(data.names))
+        elif axis == "channel" and len(data.channels) == size:
+            per_axis.append(list(data.channels))
+        else:
+            per_axis.append([f"{axis or 'lane'} {j}" for j in range(size)])
+    if "material" not in data.axes and len(data.names) == 1:
+        per_axis.insert(1 if lead else 0, list(data.names))
+    return [" ".join(parts) for parts in itertools.product(*per_axis)] or [""]
+
+
+#: a fit whose L2 is above this fraction of the L2 of f = 0 is reported as barely better than no model
+ZERO_MODEL_RATIO = 0.95
 
 
 def cmd_fit(args) -> int:
@@ -33,45 +77,95 @@ def cmd_fit(args) -> int:
 
     import polyjax as pj
 
+    from ._kinds import fitter_for, kind_of
+    from ._outputs import check_output_file
+
+    degrees = _parse_degrees(args.degree)
+    degree = degrees[0] if len(degrees) == 1 else degrees
+    polynomial = args.model.strip().lower() == "polynomial"
+    kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
+    if args.save:
+        check_output_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
     t0 = time.perf_counter()
-    model = pj.fit_polynomial(
-        data, variables=args.variables, degree=args.degree, basis=args.basis, interactions=args.interactions,
-        cutoff_deg=args.cutoff,
-    )
+    if polynomial:
+        model = pj.fit_polynomial(
+            data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
+            cutoff_deg=args.cutoff,
+        )
+    else:
+        model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
     l2 = np.asarray(model.l2)
     elapsed = time.perf_counter() - t0
-    beta = model.paper_coefficients() if not args.interactions else np.asarray(model.coefficients)
+    if polynomial:
+        beta = model.paper_coefficients() if not args.interactions else np.asarray(model.coefficients)
+        form = "paper eq. (3): beta_0, then Z_1..Z_k, Z_1^2..Z_k^2, ..." if not args.interactions else "basis"
+        n_par = np.asarray(model.n_params)
+        n_params = [int(n_par[i].ravel()[0]) for i in range(len(degrees))] if isinstance(degree, list) \
+            else int(n_par.ravel()[0])
+    else:
+        beta = np.asarray(model.params)
+        form = "parameters: " + ", ".join(model.param_names)
+        n_params = int(beta.shape[-1])
     if args.save:
         pj.save_model(args.save, model)
+    status_names = kind_of(model).status_names
+    status = [status_names[int(c)] if 0 <= int(c) < len(status_names) else str(int(c))
+              for c in np.asarray(model.status).ravel()]
+    labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
+    zero = np.asarray(pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=args.cutoff,
+                                  mask=data.mask))
+    zero = np.broadcast_to(zero, l2.shape)
+    barely = (zero > 0) & np.isfinite(l2) & (l2 > ZERO_MODEL_RATIO * zero)
+    warnings_ = []
+    if barely.any():
+        lanes = [f"{labels[i]} ({e:.4g} vs {z:.4g})" for i, (e, z, b) in
+                 enumerate(zip(l2.ravel(), zero.ravel(), barely.ravel())) if b]
+        warnings_.append(
+            f"{len(lanes)} fit(s) barely beat the zero model f = 0 (L2 above {ZERO_MODEL_RATIO:g} of its L2): "
+            + "; ".join(lanes) + ". The model cannot follow this data (e.g. a narrow peak); try another model or degree."
+        )
     out = {
         "source": data.source,
         "synthetic": synthetic,
+        "model": model_name,
         "names": list(data.names),
         "channels": list(data.channels),
-        "variables": model.variables,
-        "degree": args.degree,
-        "n_params": int(np.asarray(model.n_params).ravel()[0]),
+        "labels": labels,
+        "variables": model.variables if polynomial else None,
+        "degree": degree if polynomial else None,
+        "n_params": n_params,
         "l2": l2.tolist(),
-        "rank": np.asarray(model.rank).tolist(),
-        "condition": np.asarray(model.condition).tolist(),
-        "status": [pj.FitStatus(int(s)).name for s in np.asarray(model.status).ravel()],
+        "l2_zero_model": zero.tolist(),
+        "status": status,
         "coefficients": beta.tolist(),
-        "coefficient_form": "paper eq. (3): beta_0, then Z_1..Z_k, Z_1^2..Z_k^2, ..." if not args.interactions else "basis",
+        "coefficient_form": form,
         "seconds": elapsed,
+        "warnings": warnings_,
     }
+    if polynomial:
+        out["rank"] = np.asarray(model.rank).tolist()
+        out["condition"] = np.asarray(model.condition).tolist()
     if args.json:
         print(json.dumps(out))
         return 0
     if synthetic:
-        print(f"NOTE: no data root ({pj.DATA_ENV} unset): using the {data.source}")
+        print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
     print(f"data: {data.source}")
-    print(f"model: polynomial, variables={model.variables}, p={args.degree}, {out['n_params']} parameters, basis={args.basis}")
-    names = data.names or ("",) * max(1, l2.size)
+    if polynomial:
+        counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
+        print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
+              f"basis={args.basis}")
+    else:
+        print(f"model: {model_name}, {n_params} parameters ({', '.join(model.param_names)})")
     flat_beta = beta.reshape(-1, beta.shape[-1])
-    for i, (name, e) in enumerate(zip(names, l2.ravel())):
-        print(f"  {name:<22s} L2 = {e:.5f}   cond = {np.asarray(model.condition).ravel()[i]:.3g}   {out['status'][i]}")
-        print("    beta = " + " ".join(f"{b:+.5g}" for b in flat_beta[i]))
+    cond = np.asarray(model.condition).ravel() if polynomial else None
+    for i, (label, e) in enumerate(zip(labels, l2.ravel())):
+        extra = f"   cond = {cond[i]:.3g}" if polynomial else ""
+        print(f"  {label:<22s} L2 = {e:.5f}{extra}   {status[i]}")
+        print(("    beta = " if polynomial else "    params = ") + " ".join(f"{b:+.5g}" for b in flat_beta[i]))
+    for w in warnings_:
+        print(f"WARNING: {w}")
     print(f"fit time (including compilation): {elapsed:.3f} s")
     return 0
 
@@ -82,9 +176,11 @@ def cmd_report(args) -> int:
 
     import polyjax as pj
 
-    if not pj.has_data_root(args.data_root):
+    from ._config import configured_data_root
+
+    if configured_data_root(args.data_root) is None:
         data = pj.data.synthetic_default()
-        print(f"NOTE: no measured data ({pj.DATA_ENV} unset or missing). Running on the {data.source}.")
+        print(f"NOTE: no measured data (neither --data-root nor {pj.DATA_ENV} given). Running on the {data.source}.")
         print("      Set POLYJAX_DATA to the data folder (curet/, cornell/, nbrdf_sztrajman2021/) for the real report.\n")
         for var in ("lafortune", "ward", "ashikhmin-shirley"):
             m = pj.fit_polynomial(data, variables=var, degree=list(range(1, 9)))
@@ -114,23 +210,34 @@ def cmd_report(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="polyjax", description="Fit polynomial (and baseline) BRDF models to measured data.")
-    p.add_argument("--data-root", default=None, help="measured data folder (default: $POLYJAX_DATA)")
+    root_help = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
+                 "a folder given that does not exist is an error")
+    p.add_argument("--data-root", default=None, help=root_help)
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--data-root", default=argparse.SUPPRESS, help="measured data folder (default: $POLYJAX_DATA)")
+    common.add_argument("--data-root", default=argparse.SUPPRESS, help=root_help)
     sub = p.add_subparsers(dest="command")
 
     r = sub.add_parser("report", parents=[common], help="fit the polynomial models of the paper's tables and report them (default)")
     r.set_defaults(func=cmd_report)
 
-    f = sub.add_parser("fit", parents=[common], help="fit the polynomial model to one dataset and print L2 and coefficients")
+    f = sub.add_parser("fit", parents=[common], help="fit a model to one dataset and print L2 and coefficients",
+                       description="Fit the polynomial model (or a baseline model, --model) to a dataset; one row per "
+                       "fitted lane (degree x material x channel).")
     f.add_argument("--sample", default="25", help="CUReT sample number or name (default 25, Quarry Tile)")
-    f.add_argument("--dataset", default=None, help="dataset spec instead of --sample, e.g. curet:1,25 or merl-nbrdf:green-latex")
+    f.add_argument("--dataset", default=None,
+                   help="dataset spec instead of --sample, e.g. curet:1,25, merl-nbrdf:green-latex, cornell:cayman, "
+                   "merl:<file.binary>, nbrdf:<zip or folder>:<name>")
+    f.add_argument("--model", default="polynomial",
+                   help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
+                   "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")
     f.add_argument("--variables", default="lafortune", help="ward | ashikhmin-shirley | lafortune | lafortune-anisotropic")
-    f.add_argument("--degree", type=int, default=7)
-    f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"])
+    f.add_argument("--degree", "--degrees", dest="degree", default="7",
+                   help="polynomial degree p, or comma-separated degrees fitted in one batch (e.g. 2,3,5); default 7")
+    f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"],
+                   help="basis of the solve: scaled Legendre (default, well conditioned) or the paper's monomials")
     f.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
-    f.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees")
-    f.add_argument("--save", default=None, help="write the fitted model (.npz or .json)")
+    f.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees (default 80)")
+    f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
     f.set_defaults(func=cmd_fit)
 

@@ -42,6 +42,19 @@ def data_root(root: str | os.PathLike | None = None, *, must_exist: bool = True)
     return path
 
 
+def configured_data_root(root: str | os.PathLike | None = None) -> Path | None:
+    """The data root if one is configured (``root`` or a non-empty ``$POLYJAX_DATA``), else None.
+
+    A configured root that does not exist is an error, never silently "no data".
+
+    Raises:
+        DataNotFoundError: the configured folder does not exist (the message names it and where it came from).
+    """
+    if root is None and not os.environ.get(DATA_ENV):
+        return None
+    return data_root(root)
+
+
 def has_data_root(root: str | os.PathLike | None = None) -> bool:
     """True when a data root is configured and exists."""
     try:

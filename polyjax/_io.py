@@ -1,4 +1,13 @@
-"""Saving and loading fitted polynomial models (``.npz`` or ``.json``), bit-exact."""
+"""Saving and loading fitted models (``.npz`` or ``.json``), bit-exact.
+
+File format (version 2): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
+"static": {...}}`` and named arrays. In ``.npz`` the header is the string array ``__meta__`` and every
+array is stored under its name; in ``.json`` the header's keys are at the top level and
+``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``, inf as
+``Infinity``). ``kind`` names a :class:`polyjax.ModelKind` (``"polyjax.PolynomialBRDF"``, or one that
+another package provides, e.g. ``"baselines.BaselineFit"``), ``static`` its non-array fields.
+Version 1 files (``"format": "polyjax.PolynomialBRDF"``, static fields at the top level) still load.
+"""
 
 from __future__ import annotations
 
@@ -6,30 +15,44 @@ import json
 import os
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
-from ._errors import DataFormatError, DataNotFoundError
-from ._model import PolynomialBRDF
+from ._errors import DataFormatError, DataNotFoundError, UnknownNameError
+from ._kinds import kind_named, kind_of, module_kind, register_model_kind
+from ._model import FitStatus, PolynomialBRDF
 
-FORMAT = "polyjax.PolynomialBRDF"
-VERSION = 1
-_ARRAYS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used", "status")
-_STATIC = ("variables", "basis", "interactions", "max_degree")
+FORMAT = "polyjax.model"
+VERSION = 2
+#: version 1: polynomial models only
+FORMAT_V1 = "polyjax.PolynomialBRDF"
+_STATIC_V1 = ("variables", "basis", "interactions", "max_degree")
+
+POLYNOMIAL_KIND = register_model_kind(module_kind(
+    PolynomialBRDF, "polyjax.PolynomialBRDF", status_names=tuple(s.name for s in FitStatus),
+))
 
 
-def save_model(path: str | os.PathLike, model: PolynomialBRDF) -> Path:
-    """Write ``model`` to ``path``: ``.json`` (text, exact float repr) or anything else as ``.npz``.
+def save_model(path: str | os.PathLike, model) -> Path:
+    """Write a fitted model to ``path``: ``.json`` (text, exact float repr) or anything else as ``.npz``.
 
-    The variable set is stored by name: a user-registered set must be registered again before loading.
+    Args:
+        path: the file; a suffix other than ``.json``/``.npz`` gets ``.npz`` appended.
+        model: a :class:`polyjax.PolynomialBRDF` or any model whose class has a :class:`polyjax.ModelKind`
+            (e.g. a ``baselines.BaselineFit``).
+
+    Returns:
+        The path written. A polynomial model's variable set is stored by name: a user-registered set must be
+        registered again before loading.
     """
     path = Path(path)
-    meta = {"format": FORMAT, "version": VERSION, **{k: getattr(model, k) for k in _STATIC}}
-    arrays = {k: np.asarray(getattr(model, k)) for k in _ARRAYS}
+    kind = kind_of(model)
+    static, arrays = kind.to_arrays(model)
+    meta = {"format": FORMAT, "version": VERSION, "kind": kind.kind, "static": static}
     if path.suffix == ".json":
         doc = dict(meta)
         doc["arrays"] = {
-            k: {"dtype": str(a.dtype), "shape": list(a.shape), "data": [float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
+            k: {"dtype": str(a.dtype), "shape": list(a.shape),
+                "data": [float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
             for k, a in arrays.items()
         }
         path.write_text(json.dumps(doc))
@@ -40,32 +63,46 @@ def save_model(path: str | os.PathLike, model: PolynomialBRDF) -> Path:
     return path
 
 
-def load_model(path: str | os.PathLike) -> PolynomialBRDF:
-    """Read a model written by :func:`save_model`; it evaluates identically."""
+def load_model(path: str | os.PathLike):
+    """Read a model written by :func:`save_model` (any version); it evaluates identically.
+
+    Raises:
+        DataNotFoundError: no such file. DataFormatError: not a saved model, a newer version, or missing
+        arrays. UnknownNameError: its kind is provided by a package that is not installed.
+    """
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"{str(path)!r}: no such model file")
     try:
         if path.suffix == ".json":
-            doc = json.loads(path.read_text())
-            meta = doc
-            if isinstance(doc, dict) and doc.get("format") == FORMAT:
+            meta = json.loads(path.read_text())
+            arrays = {}
+            if isinstance(meta, dict) and isinstance(meta.get("arrays"), dict):
                 arrays = {
-                    k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"]) for k, v in doc["arrays"].items()
+                    k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"]) for k, v in meta["arrays"].items()
                 }
-            else:
-                arrays = {}
         else:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["__meta__"]))
                 arrays = {k: z[k] for k in z.files if k != "__meta__"}
-    except (ValueError, KeyError, OSError) as e:
+    except (ValueError, KeyError, TypeError, OSError) as e:
         raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format") if isinstance(meta, dict) else meta))
-    missing = [k for k in _ARRAYS if k not in arrays]
-    if missing:
-        raise DataFormatError(path, f"arrays {list(_ARRAYS)}", f"missing {missing}")
-    return PolynomialBRDF(
-        **{k: jnp.asarray(arrays[k]) for k in _ARRAYS}, **{k: meta[k] for k in _STATIC}
-    )
+    fmt = meta.get("format") if isinstance(meta, dict) else meta
+    if fmt == FORMAT_V1:
+        kind_name, static = POLYNOMIAL_KIND.kind, {k: meta.get(k) for k in _STATIC_V1}
+    elif fmt == FORMAT:
+        version = meta.get("version")
+        if not isinstance(version, int) or version > VERSION:
+            raise DataFormatError(path, f"a saved model of version <= {VERSION}", f"version {version!r} "
+                                  "(written by a newer polyjax)")
+        kind_name, static = meta.get("kind"), meta.get("static", {})
+    else:
+        raise DataFormatError(path, f"format {FORMAT!r} (or {FORMAT_V1!r})", repr(fmt))
+    try:
+        kind = kind_named(kind_name)
+    except UnknownNameError as e:
+        raise UnknownNameError(f"{str(path)!r}: {e}") from None
+    try:
+        return kind.from_arrays(static, arrays)
+    except (KeyError, TypeError, ValueError) as e:
+        raise DataFormatError(path, f"the fields of a {kind_name} model", f"{e}") from None

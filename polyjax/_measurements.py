@@ -23,7 +23,9 @@ class Measurements(eqx.Module):
         weights: solid-angle weights ``w_i`` of equation (11), shape ``(n,)`` or ``(*batch, n)``
             (1 where the data gives none).
         mask: ``(*batch, n)`` True where a measurement is valid (e.g. MERL's negative entries are False).
-        names: labels along the first batch axis (materials or samples), if any.
+        names: material (or sample) names: one per entry of the first batch axis when that axis is
+            materials, or the one material's name when there is no material axis (e.g. a single file
+            loaded by path: ``values (3, n)``, ``axes=("channel",)``, ``names=("<file stem>",)``).
         ids: sample numbers along the first batch axis (CUReT), if any.
         channels: channel labels, e.g. ``("avg",)`` or ``("R", "G", "B")``.
         axes: names of the batch axes, e.g. ``("material",)`` or ``("material", "channel")``.
@@ -61,7 +63,8 @@ class Measurements(eqx.Module):
             w = w[idx]
         names = self.names
         ids = self.ids
-        if names:
+        per_entry = len(names) == self.batch_shape[0] and not (self.axes and self.axes[0] == "channel")
+        if names and per_entry:
             names = (names[int(idx)],) if scalar else tuple(names[int(i)] for i in idx)
         if ids:
             ids = (ids[int(idx)],) if scalar else tuple(ids[int(i)] for i in idx)

@@ -57,7 +57,7 @@ def run(s: ex.Settings, out: Path, root=None, step=lambda what: None) -> dict:
     scene = pr.sphere_scene(s.size)
     renders = {"fig3": figures.fig3(s, curet, c, out, scene)}
     step("render Fig. 3")
-    refs = [pj.data.load_nbrdf(n, root) for n in s.merl_names]
+    refs = [pj.data.load_nbrdf(n, root=root) for n in s.merl_names]
     renders["table3_psnr"] = figures.table3_psnr(s, m, refs, out, scene)
     for k, scores in renders["table3_psnr"]["psnr"].items():
         res["table3"]["rows"][k]["ours_psnr"] = scores

@@ -1,9 +1,10 @@
 """Loaders for measured BRDF data; all return :class:`polyjax.Measurements`.
 
 The data root is an argument (``root=``) or the environment variable ``POLYJAX_DATA``.
-Datasets: CUReT (``load_curet``), MERL ``.binary`` files (``load_merl_binary``), the neural-BRDF fits of
-the 100 MERL materials (``load_nbrdf``, ``load_merl_nbrdf``), Cornell gonioreflectometer files
-(``load_cornell``); one entry point ``load("kind:name")``.
+Datasets: CUReT (``load_curet``), MERL ``.binary`` files (``load_merl_binary``), neural BRDFs of any set in
+the published format (``load_nbrdf``, ``load_nbrdf_measurements``) and the fits of the 100 MERL materials
+(``load_merl_nbrdf``), Cornell gonioreflectometer files (``load_cornell``); one entry point
+``load("kind:name")``; any BRDF callable as measurements: ``tabulate``.
 """
 
 from .._config import DATA_ENV, data_root, has_data_root
@@ -50,8 +51,17 @@ from ._merl import (
     rusinkiewicz_to_directions,
     write_merl_binary,
 )
-from ._nbrdf import NeuralBRDF, load_merl_nbrdf, load_nbrdf, resolve_merl_name
+from ._nbrdf import (
+    NeuralBRDF,
+    load_merl_nbrdf,
+    load_nbrdf,
+    load_nbrdf_measurements,
+    merl_nbrdf_path,
+    nbrdf_names,
+    resolve_merl_name,
+)
 from ._synthetic import synthetic_default
+from ._tabulate import tabulate
 from ._load import load
 
 __all__ = [
@@ -63,5 +73,5 @@ __all__ = [
     "WrongFormatError", "MERL_N_BINS", "MERL_NAMES", "MERL_RESOLUTION", "MERL_SCALE", "TABLE3_MATERIALS",
     "directions_to_rusinkiewicz", "load_merl_binary", "merl_bin_angles", "merl_bin_weights", "merl_grid",
     "merl_index", "read_merl_binary", "rusinkiewicz_to_directions", "write_merl_binary", "NeuralBRDF",
-    "load_merl_nbrdf", "load_nbrdf", "resolve_merl_name",
+    "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name", "tabulate",
 ]

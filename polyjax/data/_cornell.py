@@ -289,7 +289,8 @@ def load_cornell(
         angle_unit: angle unit of ASTM files (``"radians"`` or ``"degrees"``).
 
     Returns:
-        :class:`polyjax.Measurements`: one file ``values (C, n)``, ``axes=("channel",)``; several
+        :class:`polyjax.Measurements`: one file ``values (C, n)``, ``axes=("channel",)``,
+        ``names=(<file stem>,)``; several
         ``(m, C, n)``, ``axes=("material", "channel")``. Weights are 1 (the data give no solid angles).
     """
     if channels not in CHANNEL_CHOICES:
@@ -320,7 +321,7 @@ def load_cornell(
     u, v = _directions(angles)
     values = tables[0] if single else np.stack(tables)
     return make_measurements(
-        u, v, values, names=() if single else names, channels=labels,
+        u, v, values, names=names, channels=labels,
         axes=("channel",) if single else ("material", "channel"),
         source=f"Cornell gonioreflectometer {', '.join(names)} ({channels}), {angles.shape[0]} samples",
     )

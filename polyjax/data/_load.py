@@ -10,9 +10,10 @@ from .._measurements import Measurements
 from ._cornell import load_cornell
 from ._curet import load_curet
 from ._merl import load_merl_binary
-from ._nbrdf import load_merl_nbrdf
+from ._nbrdf import _is_merl_name, load_merl_nbrdf, load_nbrdf_measurements
 
-_KINDS = "'curet:<sample>', 'merl-nbrdf:<material>', 'cornell:<material>' or 'merl:<path to .binary>'"
+_KINDS = ("'curet:<sample>', 'merl-nbrdf:<material>', 'nbrdf:<zip or folder>[:<material>,...]', "
+          "'cornell:<material>' or 'merl:<path to .binary>'")
 
 
 def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measurements:
@@ -24,6 +25,10 @@ def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measure
             - ``"curet:25"``, ``"curet:25,33"``, ``"curet:quarry tile"`` or ``"curet"`` (all 61 samples);
             - ``"merl-nbrdf:green-latex"``, ``"merl-nbrdf:table3"`` (the six of Table 3), ``"merl-nbrdf:all"``:
               the neural MERL fits on the MERL grid (options ``subsample``, ``seed``);
+            - ``"nbrdf:<zip or folder>:<material>[,<material>...]"`` or ``"nbrdf:<zip or folder>"`` (all):
+              neural BRDFs of any set in the published format on the MERL grid
+              (:func:`load_nbrdf_measurements`; options ``subsample``, ``seed``); ``"nbrdf:<MERL name>"``
+              is ``"merl-nbrdf:<MERL name>"``;
             - ``"cornell:cayman"`` (also ``garnet_red``, ``acryl_blue`` or a file path; option ``channels``);
             - ``"merl:/path/to/file.binary"``: a MERL ``.binary`` file (options ``subsample``, ``seed``).
         root: data root (default ``$POLYJAX_DATA``).
@@ -36,6 +41,12 @@ def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measure
         if options:
             raise UnknownNameError(f"load({spec!r}): CUReT takes no options, found {sorted(options)}")
         return load_curet(root, items or None)
+    if kind == "nbrdf" and rest.strip() and not all(_is_merl_name(i) for i in items):
+        path, sep, what = rest.strip().rpartition(":")
+        if not sep or not path:
+            path, what = rest.strip(), ""
+        names = [s.strip() for s in what.split(",") if s.strip()]
+        return load_nbrdf_measurements(path, None if not names else names[0] if len(names) == 1 else names, **options)
     if kind in ("merl-nbrdf", "nbrdf", "merl_nbrdf"):
         if not items:
             raise UnknownNameError(f"dataset {spec!r}: expected 'merl-nbrdf:<material>[,<material>...]', 'table3' or 'all'")

@@ -53,7 +53,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .._errors import InputError
+from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements
 from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
 
@@ -230,9 +230,12 @@ def read_merl_binary(path: str | os.PathLike, *, scaled: bool = True) -> tuple[n
         (negative entries = missing data, kept negative) and the header's resolution.
 
     Raises:
-        EmptyFileError, TruncatedFileError, HeaderError, WrongFormatError, NonFiniteValueError.
+        DataNotFoundError (no such file), EmptyFileError, TruncatedFileError, HeaderError, WrongFormatError,
+        NonFiniteValueError.
     """
     path = Path(path)
+    if not path.is_file():
+        raise DataNotFoundError(f"MERL .binary file {str(path)!r}: no such file")
     data = path.read_bytes()
     expected_header = "a MERL .binary file: int32 header (90, 90, 180) then 3 x N float64"
     if len(data) == 0:
@@ -363,7 +366,7 @@ def _merl_measurements(values, valid, resolution, *, subsample, seed, names, sou
         du, dv, dw = (jnp.asarray(a[keep], dtype) for a in (u, v, w))
     return Measurements(
         u=du, v=dv, values=jnp.asarray(np.where(mask, vals, 0.0), dtype), weights=dw, mask=jnp.asarray(mask),
-        names=() if single else tuple(names), channels=("R", "G", "B"),
+        names=tuple(names), channels=("R", "G", "B"),
         axes=("channel",) if single else ("material", "channel"), source=source,
     )
 
@@ -389,7 +392,7 @@ def load_merl_binary(
         names: material names (default: the file names without extension).
 
     Returns:
-        One file: ``values`` ``(3, n)`` with ``axes=("channel",)``; several: ``(m, 3, n)`` with
+        One file: ``values`` ``(3, n)`` with ``axes=("channel",)`` and ``names=(<its stem>,)``; several: ``(m, 3, n)`` with
         ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr.
     """
     single = isinstance(paths, (str, os.PathLike))

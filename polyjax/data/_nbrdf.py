@@ -1,7 +1,10 @@
-r"""Neural-BRDF fits of the 100 MERL materials (Sztrajman, Rainer, Ritschel, Weyrich 2021), in JAX.
+r"""Neural BRDFs in the format of Sztrajman, Rainer, Ritschel, Weyrich 2021, in JAX.
 
-File below the data root: ``nbrdf_sztrajman2021/merl_nbrdf.zip`` holding ``merl_nbrdf/<name>.h5``
-(Keras weights) for every name of :data:`MERL_NAMES`. The network of each material is
+A set of networks is a zip archive or a folder holding one Keras weights file ``<material>.h5`` per
+material (:func:`load_nbrdf`, :func:`nbrdf_names`, ``load("nbrdf:<path>:<name>")``). The fits of the 100
+MERL materials are below the data root: ``nbrdf_sztrajman2021/merl_nbrdf.zip`` holding
+``merl_nbrdf/<name>.h5`` for every name of :data:`MERL_NAMES` (:func:`load_merl_nbrdf`). The network of
+each material is
 
 .. math::
     f(x) = \exp\big(W_3^\top \mathrm{relu}(W_2^\top \mathrm{relu}(W_1^\top x + b_1) + b_2) + b_3\big) - 1
@@ -24,7 +27,7 @@ import functools
 import io
 import os
 import zipfile
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Sequence
 
 import equinox as eqx
@@ -34,7 +37,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._config import data_file
-from .._errors import InputError
+from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements
 from ._errors import HeaderError, NonFiniteValueError, UnknownMaterialError, WrongFormatError
 from ._merl import MERL_NAMES, MERL_RESOLUTION, TABLE3_MATERIALS, _choose_bins, merl_bin_angles, merl_grid
@@ -147,30 +150,95 @@ def _resolve_names(name_or_names) -> tuple[list[str], bool]:
     return names, False
 
 
-def _read_weights(zf: zipfile.ZipFile, zpath: Path, name: str) -> tuple[np.ndarray, ...]:
+def _norm_name(name: str) -> str:
+    return str(name).strip().lower().replace("_", "-").replace(" ", "-")
+
+
+class _NetworkSet:
+    """A zip archive or a folder holding ``<name>.h5`` networks (in any sub-folder); names are the file stems."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path).expanduser()
+        self.zip = None
+        if self.path.is_dir():
+            found = [(p.stem, p.relative_to(self.path).as_posix()) for p in sorted(self.path.rglob("*.h5"))]
+        elif self.path.is_file():
+            try:
+                self.zip = zipfile.ZipFile(self.path)
+            except zipfile.BadZipFile:
+                raise WrongFormatError(self.path, "a zip archive (or folder) of Keras .h5 networks",
+                                       "a file that is not a zip archive") from None
+            found = [(PurePosixPath(i.filename).stem, i.filename) for i in self.zip.infolist()
+                     if not i.is_dir() and i.filename.lower().endswith(".h5")]
+        else:
+            raise DataNotFoundError(f"neural-BRDF set {str(self.path)!r}: no such zip file or folder")
+        self.members: dict[str, str] = {}
+        for stem, member in found:
+            if stem in self.members:
+                raise HeaderError(self.path, "one network per material name",
+                                  f"{stem!r} twice: {self.members[stem]!r} and {member!r}")
+            self.members[stem] = member
+        if not self.members:
+            raise WrongFormatError(self.path, "Keras networks <material>.h5 (the neural-BRDF format)", "no .h5 member")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.zip is not None:
+            self.zip.close()
+
+    def resolve(self, name: str) -> str:
+        """The stored name of ``name`` (exact, else case and ``-``/``_``/space insensitive)."""
+        if name in self.members:
+            return name
+        by_key = {_norm_name(n): n for n in self.members}
+        key = _norm_name(name)
+        if key in by_key:
+            return by_key[key]
+        close = difflib.get_close_matches(key, list(by_key), n=3)
+        hint = f"; did you mean {', '.join(by_key[c] for c in close)}?" if close else ""
+        raise UnknownMaterialError(f"material {name!r}: not in the neural-BRDF set {str(self.path)!r} "
+                                   f"({len(self.members)} networks){hint}")
+
+    def read(self, name: str) -> tuple[np.ndarray, ...]:
+        member = self.members[name]
+        blob = self.zip.read(member) if self.zip is not None else (self.path / member).read_bytes()
+        return _parse_weights(blob, self.path, member)
+
+
+def _parse_weights(blob: bytes, path: Path, member: str) -> tuple[np.ndarray, ...]:
+    """The six arrays ``W1, b1, W2, b2, W3, b3`` of a Keras weights file.
+
+    Layers are recognised by their kernels' shapes (6, 21), (21, 21), (21, 3), whatever Keras named them
+    (``dense_1``, ``dense_4`` ...); each bias is the ``bias`` dataset beside its kernel.
+    """
     import h5py
 
-    member = f"merl_nbrdf/{name}.h5"
-    try:
-        blob = zf.read(member)
-    except KeyError:
-        raise WrongFormatError(zpath, f"the member {member!r} in the neural-BRDF zip", "no such member") from None
     try:
         f = h5py.File(io.BytesIO(blob), "r")
     except OSError as e:
-        raise WrongFormatError(zpath, f"an HDF5 file in {member!r}", f"unreadable content ({e})") from None
+        raise WrongFormatError(path, f"an HDF5 file in {member!r}", f"unreadable content ({e})") from None
     out = []
     with f:
-        for layer, shape in _LAYERS:
-            for kind, shp in (("kernel:0", shape), ("bias:0", shape[1:])):
-                key = f"{layer}/{layer}/{kind}"
-                if key not in f:
-                    raise HeaderError(zpath, f"dataset {key!r} in {member!r}", f"datasets {sorted(_h5_keys(f))}")
-                a = np.asarray(f[key], dtype=np.float32)
+        keys = _h5_keys(f)
+        kernels = [k for k in keys if k.rsplit("/", 1)[-1].split(":")[0] == "kernel"]
+        for shape in (shp for _, shp in _LAYERS):
+            hits = [k for k in kernels if tuple(f[k].shape) == shape]
+            if len(hits) != 1:
+                found = {k: tuple(f[k].shape) for k in kernels}
+                raise HeaderError(path, f"one kernel of shape {shape} in {member!r} (layers 6-21-21-3)",
+                                  f"kernels {found}" if found else f"datasets {sorted(keys)}")
+            key = hits[0]
+            bias = key.rsplit("/", 1)[0] + "/" + key.rsplit("/", 1)[-1].replace("kernel", "bias")
+            if bias not in f:
+                raise HeaderError(path, f"dataset {bias!r} in {member!r}", f"datasets {sorted(keys)}")
+            for k, shp in ((key, shape), (bias, shape[1:])):
+                a = np.asarray(f[k], dtype=np.float32)
                 if a.shape != shp:
-                    raise HeaderError(zpath, f"{key!r} of shape {shp} in {member!r}", f"shape {a.shape}")
+                    raise HeaderError(path, f"{k!r} of shape {shp} in {member!r}", f"shape {a.shape}")
                 if not np.all(np.isfinite(a)):
-                    raise NonFiniteValueError(zpath, f"finite weights in {member!r}/{key}", "NaN or inf")
+                    raise NonFiniteValueError(path, f"finite weights in {member!r}/{k}", "NaN or inf")
                 out.append(a)
     return tuple(out)
 
@@ -181,32 +249,72 @@ def _h5_keys(f) -> list[str]:
     return keys
 
 
-def _open_zip(root) -> tuple[zipfile.ZipFile, Path]:
-    zpath = data_file(NBRDF_ZIP, root)
-    try:
-        return zipfile.ZipFile(zpath), zpath
-    except zipfile.BadZipFile:
-        raise WrongFormatError(zpath, "a zip archive of Keras .h5 networks", "a file that is not a zip archive") from None
+def merl_nbrdf_path(root: str | os.PathLike | None = None) -> Path:
+    """The zip of the 100 MERL networks below the data root (``nbrdf_sztrajman2021/merl_nbrdf.zip``)."""
+    return data_file(NBRDF_ZIP, root)
 
 
-def load_nbrdf(name: str, root: str | os.PathLike | None = None) -> NeuralBRDF:
-    """The neural BRDF of one MERL material, read straight from the zip.
+def nbrdf_names(path: str | os.PathLike) -> tuple[str, ...]:
+    """The material names of a neural-BRDF set (zip or folder): the stems of its ``.h5`` members, in order."""
+    with _NetworkSet(path) as nets:
+        return tuple(nets.members)
+
+
+def _is_merl_name(text) -> bool:
+    if not isinstance(text, str) or Path(text).expanduser().exists():
+        return False
+    return "/" not in text and os.sep not in text and not Path(text).suffix
+
+
+def load_nbrdf(
+    path: str | os.PathLike,
+    names: str | Sequence[str] | None = None,
+    *,
+    root: str | os.PathLike | None = None,
+) -> NeuralBRDF | dict[str, NeuralBRDF]:
+    """Neural BRDFs of any set in the published format (Sztrajman et al. 2021): a zip archive or folder
+    holding one Keras weights file ``<material>.h5`` per material, in any sub-folder (e.g. the MERL set,
+    the RGL-EPFL isotropic materials, the Nielsen et al. materials, or your own trained networks).
 
     Args:
-        name: a MERL name, e.g. ``"yellow-plastic"`` (see :data:`MERL_NAMES`).
-        root: data root (default ``$POLYJAX_DATA``).
+        path: the zip or folder. For compatibility, a MERL material name that is not an existing path
+            (``load_nbrdf("yellow-plastic")``) reads that material from the data root's MERL zip
+            (:func:`merl_nbrdf_path`).
+        names: None (every network of the set), one name, or a sequence of names; names match the file
+            stems exactly or up to case and ``-``/``_``/space.
+        root: data root for the MERL-name form (default ``$POLYJAX_DATA``).
+
+    Returns:
+        One name: a :class:`NeuralBRDF`; None or a sequence: ``{name: NeuralBRDF}`` in the set's order
+        (or the order asked for).
+
+    Raises:
+        DataNotFoundError (no such path), WrongFormatError (not a zip, no ``.h5`` member), HeaderError
+        (duplicate names, a network without the 6-21-21-3 layers), UnknownMaterialError (a name not in the set,
+        with suggestions).
     """
-    name = resolve_merl_name(name)
-    zf, zpath = _open_zip(root)
-    with zf:
-        w = _read_weights(zf, zpath, name)
-    return NeuralBRDF(*(jnp.asarray(a) for a in w), name=name)
+    if names is None and _is_merl_name(path):
+        name = resolve_merl_name(path)
+        with _NetworkSet(merl_nbrdf_path(root)) as nets:
+            w = nets.read(nets.resolve(name))
+        return NeuralBRDF(*(jnp.asarray(a) for a in w), name=name)
+    with _NetworkSet(path) as nets:
+        single = isinstance(names, str)
+        if names is None:
+            wanted = list(nets.members)
+        elif single:
+            wanted = [nets.resolve(names)]
+        else:
+            wanted = [nets.resolve(n) for n in names]
+            if not wanted:
+                raise InputError("names: expected at least one material name (or None for all)")
+        out = {n: NeuralBRDF(*(jnp.asarray(a) for a in nets.read(n)), name=n) for n in wanted}
+    return out[wanted[0]] if single else out
 
 
-def _stacked_params(names: Sequence[str], root) -> tuple[np.ndarray, ...]:
-    zf, zpath = _open_zip(root)
-    with zf:
-        ws = [_read_weights(zf, zpath, n) for n in names]
+def _stacked_params(names: Sequence[str], path) -> tuple[np.ndarray, ...]:
+    with _NetworkSet(path) as nets:
+        ws = [nets.read(nets.resolve(n)) for n in names]
     return tuple(np.stack(parts) for parts in zip(*ws))
 
 
@@ -251,11 +359,45 @@ def load_merl_nbrdf(
         seed: seed of the subsample.
 
     Returns:
-        One name: ``values (3, n)``, ``axes=("channel",)``; several: ``(m, 3, n)``,
+        One name: ``values (3, n)``, ``axes=("channel",)``, ``names=(name,)``; several: ``(m, 3, n)``,
         ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr; mask all True.
     """
     names, single = _resolve_names(name_or_names)
-    params = _stacked_params(names, root)
+    return _grid_measurements(merl_nbrdf_path(root), names, single, subsample, seed,
+                              "neural-BRDF fits (Sztrajman et al. 2021) of MERL")
+
+
+def load_nbrdf_measurements(
+    path: str | os.PathLike,
+    names: str | Sequence[str] | None = None,
+    subsample: int | float | None = None,
+    seed: int = 0,
+) -> Measurements:
+    """Any neural-BRDF set (see :func:`load_nbrdf`) evaluated on the MERL grid, as :func:`load_merl_nbrdf` does.
+
+    Args:
+        path: zip or folder of ``<material>.h5`` networks.
+        names: None (all), one name, or a sequence of names.
+        subsample, seed: as in :func:`load_merl_nbrdf`.
+
+    Returns:
+        One name: ``values (3, n)``, ``axes=("channel",)``, ``names=(name,)``; None or a sequence:
+        ``(m, 3, n)``, ``axes=("material", "channel")``.
+    """
+    with _NetworkSet(path) as nets:
+        if names is None:
+            wanted, single = list(nets.members), False
+        elif isinstance(names, str):
+            wanted, single = [nets.resolve(names)], True
+        else:
+            wanted, single = [nets.resolve(n) for n in names], False
+    if not wanted:
+        raise InputError("names: expected at least one material name (or None for all)")
+    return _grid_measurements(path, wanted, single, subsample, seed, f"neural BRDFs of {Path(path).name}:")
+
+
+def _grid_measurements(path, names, single, subsample, seed, what) -> Measurements:
+    params = _stacked_params(names, path)
     if subsample is not None and not isinstance(subsample, (int, float, np.integer, np.floating)):
         raise InputError(f"subsample: expected None, a count or a fraction in (0, 1), found {subsample!r}")
     dtype = jnp.dtype(jnp.result_type(float))
@@ -265,8 +407,8 @@ def load_merl_nbrdf(
         vals = vals[0]
     return Measurements(
         u=u, v=v, values=vals, weights=w, mask=jnp.ones(vals.shape, bool),
-        names=() if single else tuple(names), channels=("R", "G", "B"),
+        names=tuple(names), channels=("R", "G", "B"),
         axes=("channel",) if single else ("material", "channel"),
-        source=f"neural-BRDF fits (Sztrajman et al. 2021) of MERL {', '.join(names)} on the MERL grid, "
+        source=f"{what} {', '.join(names)} on the MERL grid, "
         f"{u.shape[0]} bins" + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
     )

@@ -5,6 +5,10 @@ direction ``v`` as ``(..., 3)`` unit vectors in the local shading frame (normal 
 :mod:`polyjax._geometry`) and returning ``(..., 3)`` RGB values (or ``(...)`` grey values,
 broadcast to the three channels). Fitted models, measured data and analytic BRDFs are all
 wrapped into this one protocol by :func:`rgb_brdf`.
+
+Light transport uses ``max(f, 0)`` (:func:`evaluate_rgb`): a fitted model (a polynomial, above all) can
+be negative where the data has a narrow peak or no samples, and a negative BRDF would emit negative
+radiance. The model's own values (``model(u, v)``) are not clamped.
 """
 
 from __future__ import annotations
@@ -29,7 +33,11 @@ def _above(u, v):
 
 
 def evaluate_rgb(brdf: BRDF, u: Array, v: Array) -> Float[Array, "... 3"]:
-    """Evaluate ``brdf`` and bring the result to ``(..., 3)``.
+    """Evaluate ``brdf``, bring the result to ``(..., 3)`` and clamp it at 0: ``max(f(u, v), 0)``.
+
+    This is the BRDF the renderer transports light with: a fitted model that goes negative
+    somewhere reflects nothing there instead of emitting negative radiance. The gradient is that
+    of ``f`` where ``f > 0`` and 0 where it is clamped.
 
     Accepts outputs of shape ``(..., 3)`` (RGB) or ``(...)`` (grey, repeated in R, G and B).
 
@@ -40,9 +48,9 @@ def evaluate_rgb(brdf: BRDF, u: Array, v: Array) -> Float[Array, "... 3"]:
     shape = jnp.broadcast_shapes(u.shape, v.shape)[:-1]
     out = jnp.asarray(brdf(u, v))
     if out.shape == shape + (3,):
-        return out
+        return jnp.maximum(out, 0.0)
     if out.shape == shape:
-        return jnp.broadcast_to(out[..., None], shape + (3,))
+        return jnp.broadcast_to(jnp.maximum(out, 0.0)[..., None], shape + (3,))
     raise InputError(
         f"brdf {type(brdf).__name__}: expected an output of shape {shape + (3,)} (RGB) or {shape} (grey) "
         f"for directions of shape {shape + (3,)}, found {out.shape}; wrap models with a leading channel "
@@ -81,23 +89,24 @@ class SwapUV(eqx.Module):
 def rgb_brdf(model) -> BRDF:
     """Wrap anything BRDF-like into the renderer's protocol ``f(u, v) -> (..., 3)``.
 
-    - a :class:`polyjax.PolynomialBRDF` with batch shape ``()``, ``(1,)`` or ``(3,)`` (grey or
-      channels): wrapped in :class:`ChannelsFirst` when it has a channel axis. Other batch
-      shapes (e.g. materials) must be indexed first (``model[i]``).
+    - a :class:`polyjax.PolynomialBRDF`, or any fitted model with a ``batch_shape`` (e.g. a
+      ``baselines.BaselineFit``), with batch shape ``()``, ``(1,)`` or ``(3,)`` (grey or channels):
+      wrapped in :class:`ChannelsFirst` when it has a channel axis. Other batch shapes (e.g.
+      materials) must be indexed first (``model[i]``).
     - any other callable (analytic BRDFs, :class:`TabulatedBRDF`, ``polyjax.data.NeuralBRDF``)
       is returned unchanged; its output is checked when it is evaluated.
 
     Raises:
         InputError: a polynomial model with a batch shape other than ``()``, ``(1,)``, ``(3,)``.
     """
-    if isinstance(model, PolynomialBRDF):
-        bs = model.batch_shape
+    if isinstance(model, PolynomialBRDF) or isinstance(getattr(model, "batch_shape", None), tuple):
+        bs = tuple(model.batch_shape)
         if bs == ():
             return model
         if bs in ((1,), (3,)):
             return ChannelsFirst(model)
         raise InputError(
-            f"model: expected a PolynomialBRDF with batch shape () or (1,) or (3,) (channels), found {bs}; "
+            f"model: expected a fitted model with batch shape () or (1,) or (3,) (channels), found {bs}; "
             "select one material first, e.g. model[i]"
         )
     if not callable(model):

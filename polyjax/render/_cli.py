@@ -20,8 +20,12 @@ def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
                    help="dataset spec, e.g. curet:25,33 or merl-nbrdf:green-latex (default: curet:25 with a data "
                         "root, else the built-in synthetic set)")
     r.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
-    r.add_argument("--degrees", default="5", help="comma-separated polynomial degrees: one grid row each")
-    r.add_argument("--model", default=None, help="render a saved model (polyjax.save_model) instead of fitting")
+    r.add_argument("--degrees", "--degree", dest="degrees", default="5",
+                   help="polynomial degree, or comma-separated degrees: one grid row each (default 5)")
+    r.add_argument("--model", default=None,
+                   help="a saved model file (.npz/.json of polyjax.save_model: polynomial or baseline fit; it must "
+                   "hold as many materials as --dataset), or a baseline model name as in `fit --model` (e.g. "
+                   "cook-torrance) fitted to --dataset; rendered instead of the polynomial degrees")
     r.add_argument("--reference", action="store_true", help="add the measured data as the first row, and PSNR")
     r.add_argument("--light", default="point",
                    help="point | directional | sky (procedural environment) | path to a lat-long .exr map")
@@ -58,7 +62,7 @@ def _reference(spec: str, m, k: int, root):
     kind, _, _ = spec.partition(":")
     if kind.strip().lower() == "merl-nbrdf" and hasattr(pj.data, "load_nbrdf"):
         names = list(m.names) if m.names else [spec.partition(":")[2]]
-        return pj.data.load_nbrdf(names[k], root)
+        return pj.data.load_nbrdf(names[k], root=root)
     has_channels = bool(m.axes) and m.axes[-1] == "channel"
     vals = np.asarray(m.values)
     keep = np.ones(vals.shape, bool) if m.mask is None else np.broadcast_to(np.asarray(m.mask), vals.shape)
@@ -81,15 +85,17 @@ def run_render(args) -> int:
     import polyjax as pj
 
     from . import Camera, Scene, Sphere, SwapUV, comparison_figure, mosaic, render_grid, rgb_brdf, write_exr, write_png
+    from .._cli import _parse_degrees
+    from .._config import configured_data_root
     from .._errors import InputError
+    from .._outputs import check_output_file
 
     root = getattr(args, "data_root", None)
-    spec = args.dataset or ("curet:25" if pj.has_data_root(root) else "synthetic")
+    out = Path(args.out)
+    check_output_file(out.with_suffix(".exr"), "--out")
+    degrees = _parse_degrees(args.degrees, "--degrees")
+    spec = args.dataset or ("curet:25" if configured_data_root(root) is not None else "synthetic")
     m = pj.data.synthetic_default() if spec == "synthetic" else pj.data.load(spec, root)
-    try:
-        degrees = [int(d) for d in str(args.degrees).split(",") if d.strip()]
-    except ValueError:
-        raise InputError(f"--degrees: expected comma-separated integers, found {args.degrees!r}") from None
     has_channels = bool(m.axes) and m.axes[-1] == "channel"
     vals = np.asarray(m.values)
     n_mat = int(np.prod(vals.shape[: vals.ndim - (2 if has_channels else 1)], dtype=int))
@@ -100,19 +106,34 @@ def run_render(args) -> int:
         import jax
 
         nb = len(model.batch_shape) - (1 if has_channels else 0)
+        n_model = int(np.prod(model.batch_shape[:max(nb, 0)], dtype=int))
+        if n_model != n_mat:
+            raise InputError(
+                f"--model {args.model!r}: holds {n_model} material(s) (batch shape {model.batch_shape}), but the "
+                f"dataset {spec!r} has {n_mat}; pass the --dataset the model was fitted to"
+            )
         if nb <= 0:
             return [rgb_brdf(model)]
         flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), model)
-        return [rgb_brdf(flat[k]) for k in range(n_mat)]
+        return [rgb_brdf(jax.tree.map(lambda a, k=k: a[k], flat)) for k in range(n_mat)]
 
+    saved = None
+    if args.model and args.model.strip().lower() != "polynomial":
+        from .._kinds import fitter_for
+
+        is_file = Path(args.model).suffix in (".npz", ".json") or Path(args.model).exists()
+        if is_file:
+            saved = lanes(pj.load_model(args.model))
+        else:
+            kind, model_name = fitter_for(args.model)
+            saved = lanes(kind.fit(model_name, m))
     rows, row_names = [], []
     if args.reference:
         rows.append([_reference(spec, m, k, root) for k in range(n_mat)])
         row_names.append("measured")
-    if args.model:
-        model = pj.load_model(args.model)
-        rows.append(lanes(model))
-        row_names.append(Path(args.model).stem)
+    if saved is not None:
+        rows.append(saved)
+        row_names.append(Path(args.model).stem if is_file else model_name)
     else:
         for p in degrees:
             model = pj.fit_polynomial(m, variables=args.variables, degree=p)
@@ -125,7 +146,6 @@ def run_render(args) -> int:
     grid = render_grid(rows, scene, spp=args.spp)
     images = np.asarray(grid.images, dtype=np.float32)
     big = mosaic(images, pad=2, fill=0.0)
-    out = Path(args.out)
     write_exr(out.with_suffix(".exr"), big)
     write_png(out.with_suffix(".png"), big, exposure=args.exposure)
     print(f"rows: {', '.join(row_names)}; columns: {', '.join(names[:n_mat])}")

@@ -1,0 +1,147 @@
+"""Kinds of fitted model that :func:`polyjax.save_model`, :func:`polyjax.load_model` and ``polyjax fit --model``
+know, found without polyjax importing the packages that define them.
+
+A kind is a :class:`ModelKind` record: the name stored in saved files, the model's class, functions to and
+from plain arrays, and optionally the model families it can fit (``polyjax fit --model <name>``). polyjax
+registers its own :class:`polyjax.PolynomialBRDF`; another package provides kinds through the entry point
+group ``polyjax.models`` of its metadata (``pyproject.toml``)::
+
+    [project.entry-points."polyjax.models"]
+    "mypackage.MyFit" = "mypackage._saving:KIND"
+
+or calls :func:`register_model_kind` on import. Entry points are loaded only when a kind is asked for that is
+not registered yet.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from collections.abc import Callable
+from importlib import metadata
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import UnknownNameError
+
+ENTRY_POINT_GROUP = "polyjax.models"
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelKind:
+    """How to store (and optionally fit) one class of fitted model.
+
+    Attributes:
+        kind: the name written into saved files (``"<package>.<class>"`` by convention); never change it.
+        type: the class of the fitted models.
+        to_arrays: ``model -> (static, arrays)``: a JSON-serialisable dict and a dict of numpy arrays.
+        from_arrays: ``(static, arrays) -> model``, the inverse (bit-exact).
+        models: names of the model families ``fit`` accepts (``polyjax fit --model <name>``).
+        fit: ``(name, measurements, **options) -> model``; options the command line passes:
+            ``cutoff_deg``.
+        status_names: names of the integer codes in the model's ``status`` field, for reports.
+    """
+
+    kind: str
+    type: type
+    to_arrays: Callable[[Any], tuple[dict, dict]]
+    from_arrays: Callable[[dict, dict], Any]
+    models: tuple[str, ...] = ()
+    fit: Callable[..., Any] | None = None
+    status_names: tuple[str, ...] = ()
+
+
+def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, status_names=()) -> ModelKind:
+    """A :class:`ModelKind` for an ``equinox.Module`` class: its array fields are stored as arrays, its
+    static fields (which must be JSON values: str, int, float, bool) in ``static``, all by field name."""
+    fields = dataclasses.fields(cls)
+    static = tuple(f.name for f in fields if f.metadata.get("static", False))
+    arrays = tuple(f.name for f in fields if not f.metadata.get("static", False))
+
+    def to_arrays(model):
+        return {k: getattr(model, k) for k in static}, {k: np.asarray(getattr(model, k)) for k in arrays}
+
+    def from_arrays(meta, arrs):
+        missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta]
+        if missing:
+            raise KeyError(f"missing fields {missing}")
+        return cls(**{k: jnp.asarray(arrs[k]) for k in arrays}, **{k: meta[k] for k in static})
+
+    return ModelKind(kind=kind, type=cls, to_arrays=to_arrays, from_arrays=from_arrays, models=tuple(models), fit=fit,
+                     status_names=tuple(status_names))
+
+
+_REGISTRY: dict[str, ModelKind] = {}
+_LOADED_ENTRY_POINTS: set[str] = set()
+
+
+def register_model_kind(kind: ModelKind) -> ModelKind:
+    """Register ``kind`` (replacing a kind of the same name); returns it."""
+    if not isinstance(kind, ModelKind):
+        raise TypeError(f"kind: expected a polyjax.ModelKind, found {type(kind).__name__}")
+    _REGISTRY[kind.kind] = kind
+    return kind
+
+
+def _load_entry_points() -> None:
+    """Load every entry point of the group not loaded yet (each registers the kind it names)."""
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        key = f"{ep.name}={ep.value}"
+        if key in _LOADED_ENTRY_POINTS:
+            continue
+        _LOADED_ENTRY_POINTS.add(key)
+        try:
+            obj = ep.load()
+        except Exception as e:  # noqa: BLE001  (a broken provider must not break the others)
+            warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: {e}",
+                          stacklevel=3)
+            continue
+        if isinstance(obj, ModelKind):
+            _REGISTRY.setdefault(obj.kind, obj)
+
+
+def model_kinds() -> dict[str, ModelKind]:
+    """Every known kind (registered, and those of installed entry points), by name."""
+    _load_entry_points()
+    return dict(_REGISTRY)
+
+
+def kind_named(name: str) -> ModelKind:
+    """The kind stored in a file under ``name``; UnknownNameError when no installed package provides it."""
+    if name not in _REGISTRY:
+        _load_entry_points()
+    if name not in _REGISTRY:
+        raise UnknownNameError(
+            f"model kind {name!r}: not provided by any installed package (known: {sorted(_REGISTRY)}); install the "
+            f"package that defines it (it declares the entry point group {ENTRY_POINT_GROUP!r})"
+        )
+    return _REGISTRY[name]
+
+
+def kind_of(model) -> ModelKind:
+    """The kind of a fitted model object (by its class, most specific first)."""
+    for attempt in range(2):
+        for cls in type(model).__mro__:
+            for k in _REGISTRY.values():
+                if k.type is cls:
+                    return k
+        if attempt == 0:
+            _load_entry_points()
+    raise UnknownNameError(
+        f"model: no saved-model kind for {type(model).__module__}.{type(model).__name__} (known: "
+        f"{sorted(k.type.__name__ for k in _REGISTRY.values())}); register one with polyjax.register_model_kind"
+    )
+
+
+def fitter_for(name: str) -> tuple[ModelKind, str]:
+    """The kind whose ``models`` include ``name`` (case, ``_`` and space insensitive), and the name as it spells it."""
+    key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
+    kinds = model_kinds()
+    for k in kinds.values():
+        for m in k.models:
+            if m.lower() == key and k.fit is not None:
+                return k, m
+    known = sorted(m for k in kinds.values() if k.fit is not None for m in k.models)
+    raise UnknownNameError(f"--model {name!r}: expected 'polynomial' or one of {known}")
