@@ -12,8 +12,8 @@ Typical use::
     write_exr("sphere.exr", result.image); write_png("sphere.png", result.image)
 """
 
-from ._brdf import BRDF, ChannelsFirst, Lambertian, Phong, SwapUV, TabulatedBRDF, evaluate_rgb, rgb_brdf
-from ._envmap import EnvironmentLight, load_envmap, procedural_sky, sample_pool
+from ._brdf import BRDF, ChannelsFirst, Lambertian, ParametricBRDF, Phong, SwapUV, TabulatedBRDF, evaluate_rgb, rgb_brdf
+from ._envmap import EnvironmentLight, load_envmap, pool_indices, procedural_sky, sample_pool
 from ._grid import GridResult, render_grid, sphere_scene
 from ._image import comparison_figure, difference_images, mosaic, read_exr, to_srgb, write_exr, write_png
 from ._integrator import RenderResult, cast_floats, render
@@ -21,8 +21,8 @@ from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene,
 
 __all__ = [
     "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult", "Lambertian",
-    "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV", "TabulatedBRDF", "cast_floats",
-    "comparison_figure", "difference_images", "evaluate_rgb", "load_envmap", "mosaic", "plan_effects",
-    "procedural_sky", "read_exr", "sample_pool", "render", "render_grid", "rgb_brdf", "sphere_scene", "to_srgb", "write_exr",
-    "write_png",
+    "ParametricBRDF", "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV", "TabulatedBRDF",
+    "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb", "load_envmap", "mosaic", "plan_effects",
+    "pool_indices", "procedural_sky", "read_exr", "sample_pool", "render", "render_grid", "rgb_brdf", "sphere_scene",
+    "to_srgb", "write_exr", "write_png",
 ]

@@ -105,6 +105,25 @@ def rgb_brdf(model) -> BRDF:
     return model
 
 
+class ParametricBRDF(eqx.Module):
+    """A BRDF given as a function of parameters: ``f(u, v) = fn(params, u, v)``.
+
+    ``params`` is any pytree of arrays (the pytree leaves of this module), so ``jax.grad`` of a
+    render with respect to a scene holding this BRDF gives the derivative with respect to them
+    (e.g. ``eqx.filter_grad``, or build the scene inside the differentiated function).
+
+    Attributes:
+        fn: ``fn(params, u, v) -> (..., 3)`` or ``(...)`` (static).
+        params: the parameters.
+    """
+
+    fn: Callable = eqx.field(static=True)
+    params: object
+
+    def __call__(self, u: Array, v: Array) -> Array:
+        return self.fn(self.params, u, v)
+
+
 class Lambertian(eqx.Module):
     r"""The ideal diffuse BRDF ``f = albedo / pi`` (above the horizon, 0 below).
 
@@ -234,4 +253,4 @@ class TabulatedBRDF(eqx.Module):
         return jnp.where(_above(u, v)[..., None], f, 0.0)
 
 
-__all__ = ["BRDF", "ChannelsFirst", "Lambertian", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf"]
+__all__ = ["BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf"]

@@ -41,7 +41,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
 from ._brdf import evaluate_rgb
-from ._envmap import EnvironmentLight, sample_pool
+from ._envmap import EnvironmentLight, pool_indices
 from ._scene import DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
@@ -339,6 +339,14 @@ def _stage_finish(g, rad, width: int, height: int):
     return img.reshape(height, width, 3), g["hit"].reshape(height, width)
 
 
+def _radiance_pool(env, n, seed, dtype):
+    """``(directions, L / pdf)`` of :func:`pool_indices`, with ``L`` gathered from the map's own (possibly
+    traced) texels, so that the render differentiates with respect to them."""
+    d, k, inv_pdf = pool_indices(env, n, seed)
+    radiance = env.image.reshape(-1, 3)[jnp.asarray(k)]
+    return jnp.asarray(d, dtype), (radiance * jnp.asarray(inv_pdf, dtype)[:, None]).astype(dtype)
+
+
 def _black_env(dtype):
     return cast_floats(EnvironmentLight(np.zeros((8, 16, 3))), dtype)
 
@@ -366,7 +374,7 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
     pool = None
     if effects.environment:
         env = scene.environment if scene.environment is not None else _black_env(dtype)
-        pool = tuple(jnp.asarray(a, dtype) for a in sample_pool(env, _pool_size(int(spp)), int(seed)))
+        pool = _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype)
     bounces = max(scene.max_bounces, 1) if effects.indirect else 0
     sampled = effects.environment or effects.indirect
     seed_arr = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)
