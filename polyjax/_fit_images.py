@@ -181,13 +181,23 @@ def fit_polynomial_to_images(
     y = jnp.where(keep[:, None], jnp.concatenate(y), 0.0)
     wpx = jnp.where(keep, jnp.concatenate(wpx), 0.0)
     c = jnp.where(keep[:, None, None], c, 0.0)
+    shared = False
+    if _concrete((keep, c)):
+        # concrete selection: solve on the kept pixels only, and with one design for the three channels
+        # when every light is grey (the same weights in R, G and B)
+        idx = np.flatnonzero(np.asarray(keep))
+        if idx.size:
+            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
+        cn = np.asarray(c)
+        shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
     return _solve(u, v, c, y, wpx, keep, variables=vs.name, degree=degree, basis=basis, interactions=bool(interactions),
-                  method=method, rcond=rcond)
+                  method=method, rcond=rcond, shared=shared)
 
 
-@functools.partial(jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond"))
-def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond) -> PolynomialBRDF:
-    """The design of equation (3) summed over light samples, and one weighted solve per channel."""
+@functools.partial(jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond", "shared"))
+def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond, shared) -> PolynomialBRDF:
+    """The design of equation (3) summed over light samples, and one weighted solve per channel (one solve
+    with three right-hand sides when ``shared``: every light weight is the same in R, G and B)."""
     n, n_j, _ = u.shape
     lit = keep[:, None] & (jnp.sum(c, axis=-1) > 0)  # (N, J): the (pixel, light) pairs in the fit
     safe_u = jnp.where(lit[..., None], u, jnp.asarray([0.0, 0.0, 1.0], u.dtype))
@@ -197,16 +207,24 @@ def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method
     pca, centre, hw, d = _design_for(x.reshape(n * n_j, k), lit.reshape(-1), degree, basis, interactions)
     m = d.shape[-1]
     d = jnp.where(lit.reshape(-1, 1), d, 0.0).reshape(n, n_j, m)
-    design = jnp.einsum("njm,njc->cnm", d, c)  # (3, N, m): one design per channel
+    den = jnp.sum(wpx)
 
-    def channel(dc, yc):
-        sol = weighted_lstsq(dc, yc, wpx, method=method, rcond=rcond)
-        r = yc - dc @ sol.coefficients
-        den = jnp.sum(wpx)
-        rms = jnp.where(den > 0, jnp.sqrt(jnp.sum(wpx * r * r) / jnp.where(den > 0, den, 1.0)), jnp.inf)
-        return sol.coefficients, rms, sol.rank, sol.condition, sol.n_active
+    def rms_of(r):
+        return jnp.where(den > 0, jnp.sqrt(jnp.sum(wpx[:, None] * r * r, axis=0) / jnp.where(den > 0, den, 1.0)), jnp.inf)
 
-    coef, rms, rank, cond, n_act = jax.vmap(channel)(design, y.T)
+    if shared:
+        design = jnp.einsum("njm,nj->nm", d, c[..., 0])
+        sol = weighted_lstsq(design, y, wpx, method=method, rcond=rcond)
+        coef, rms = sol.coefficients.T, rms_of(y - design @ sol.coefficients)
+        rank, cond, n_act = (jnp.broadcast_to(a, (3,)) for a in (sol.rank, sol.condition, sol.n_active))
+    else:
+        design = jnp.einsum("njm,njc->cnm", d, c)  # (3, N, m): one design per channel
+
+        def channel(dc, yc):
+            sol = weighted_lstsq(dc, yc, wpx, method=method, rcond=rcond)
+            return sol.coefficients, rms_of((yc - dc @ sol.coefficients)[:, None])[0], sol.rank, sol.condition, sol.n_active
+
+        coef, rms, rank, cond, n_act = jax.vmap(channel)(design, y.T)
     n_used = jnp.sum(keep).astype(jnp.int32)
     status = jnp.where(n_used == 0, FitStatus.NO_SAMPLES,
                        jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)).astype(jnp.int32)
