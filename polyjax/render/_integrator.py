@@ -24,6 +24,14 @@ Each term is computed only if :func:`polyjax.render.plan_effects` says it exists
 Each effect is its own compiled stage (primary rays, point lights, environment, occlusion,
 indirect, compositing), called only when the effect is on.
 
+**Derivatives.** Every term is differentiable (``jax.grad``, ``jax.jvp``, ``vmap`` of them, under
+``jit``) with respect to the BRDFs' parameters (polynomial coefficients, any BRDF module's arrays,
+neural weights, tabulated values), light intensities, irradiances, positions and directions, and
+environment-map texels; scenes can be built inside the differentiated function. Visibility
+(``V``) is piecewise constant: a moving shadow edge has no derivative. Environment samples and
+their densities are held fixed (drawn from the map's sampling tables): the derivative with respect
+to a texel is that of the estimator, an unbiased estimate of the integral's derivative.
+
 ``force_all_effects=True`` computes every term whatever the scene (a black environment map when
 there is none, shadow rays, one indirect bounce at least); on a scene where the extra terms
 contribute nothing the pixels are identical: the shared terms come from the same compiled code
