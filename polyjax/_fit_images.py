@@ -194,7 +194,9 @@ def fit_polynomial_to_images(
                   method=method, rcond=rcond, shared=shared)
 
 
-@functools.partial(jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond", "shared"))
+@functools.partial(
+    jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond", "shared")
+)
 def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond, shared) -> PolynomialBRDF:
     """The design of equation (3) summed over light samples, and one weighted solve per channel (one solve
     with three right-hand sides when ``shared``: every light weight is the same in R, G and B)."""
@@ -210,7 +212,8 @@ def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method
     den = jnp.sum(wpx)
 
     def rms_of(r):
-        return jnp.where(den > 0, jnp.sqrt(jnp.sum(wpx[:, None] * r * r, axis=0) / jnp.where(den > 0, den, 1.0)), jnp.inf)
+        ms = jnp.sum(wpx[:, None] * r * r, axis=0) / jnp.where(den > 0, den, 1.0)
+        return jnp.where(den > 0, jnp.sqrt(ms), jnp.inf)
 
     if shared:
         design = jnp.einsum("njm,nj->nm", d, c[..., 0])
@@ -222,7 +225,8 @@ def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method
 
         def channel(dc, yc):
             sol = weighted_lstsq(dc, yc, wpx, method=method, rcond=rcond)
-            return sol.coefficients, rms_of((yc - dc @ sol.coefficients)[:, None])[0], sol.rank, sol.condition, sol.n_active
+            rms = rms_of((yc - dc @ sol.coefficients)[:, None])[0]
+            return sol.coefficients, rms, sol.rank, sol.condition, sol.n_active
 
         coef, rms, rank, cond, n_act = jax.vmap(channel)(design, y.T)
     n_used = jnp.sum(keep).astype(jnp.int32)

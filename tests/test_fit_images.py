@@ -18,9 +18,10 @@ def _cam(size=SIZE):
     return pr.Camera(eye=(0.0, 0.0, 5.0), width=size, height=size, fov_deg=30.0)
 
 
-def _scenes(placeholder=pr.Lambertian(0.5)):
-    lights = [[pr.PointLight(p, 30.0)] for p in POSITIONS[:3]] + [[pr.DirectionalLight((1.0, 0.0, 0.3), (2.0, 1.5, 1.0))]]
-    return [pr.Scene(_cam(), [pr.Sphere(placeholder)], li) for li in lights]
+def _scenes():
+    lights = [[pr.PointLight(p, 30.0)] for p in POSITIONS[:3]]
+    lights.append([pr.DirectionalLight((1.0, 0.0, 0.3), (2.0, 1.5, 1.0))])
+    return [pr.Scene(_cam(), [pr.Sphere(pr.Lambertian(0.5))], li) for li in lights]
 
 
 def _with_brdf(scene, brdf):
@@ -49,7 +50,8 @@ def test_light_samples_render_like_the_renderer():
         img = pr.render(scene, spp=8, dtype=jnp.float64).image.reshape(-1, 3)
         on = np.asarray(ls.on_target)
         assert on.sum() > 100
-        np.testing.assert_allclose(np.asarray(render_linear(ls, PHONG))[on], np.asarray(img)[on], rtol=1e-12, atol=1e-14)
+        linear = np.asarray(render_linear(ls, PHONG))
+        np.testing.assert_allclose(linear[on], np.asarray(img)[on], rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize("which", ["point", "mixed"])

@@ -178,8 +178,8 @@ def test_environment_built_inside_jit_is_linear_in_its_texels():
 
 def test_vmap_of_grad_over_intensities():
     def loss(i):
-        return jnp.sum(pr.render(pr.Scene(_camera(), [pr.Sphere(pr.Lambertian(0.5))], [pr.PointLight((2.0, 2.0, 4.0), i)]),
-                                 dtype=jnp.float64).image)
+        scene = pr.Scene(_camera(), [pr.Sphere(pr.Lambertian(0.5))], [pr.PointLight((2.0, 2.0, 4.0), i)])
+        return jnp.sum(pr.render(scene, dtype=jnp.float64).image)
 
     xs = jnp.asarray([10.0, 20.0, 30.0])
     g = jax.vmap(jax.grad(loss))(xs)

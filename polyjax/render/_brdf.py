@@ -285,4 +285,6 @@ class TabulatedBRDF(eqx.Module):
         return jnp.where(_above(u, v)[..., None], f, 0.0)
 
 
-__all__ = ["BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf"]
+__all__ = [
+    "BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf",
+]
