@@ -153,3 +153,14 @@ def test_neural_merl_from_images_close_to_direct_fit():
     ratio = np.asarray(l2_images / l2_direct)
     assert np.all(ratio <= 1.2), ratio
     assert np.all(ratio >= 1.0 - 1e-9), ratio  # the direct fit minimises this very error
+
+
+def test_fit_under_jit_equals_eager_fit():
+    """Under jit the pixel selection is traced (no compaction, one design per channel): the same fit."""
+    scenes = _scenes()[:2]
+    imgs = jnp.stack(_images(scenes, PHONG))
+    eager = pj.fit_polynomial_to_images(scenes, imgs, degree=3)
+    jitted = jax.jit(lambda x: pj.fit_polynomial_to_images(scenes, x, degree=3))(imgs)
+    np.testing.assert_allclose(np.asarray(jitted.coefficients), np.asarray(eager.coefficients), rtol=0,
+                               atol=1e-10 * float(jnp.max(jnp.abs(eager.coefficients))))
+    assert np.array_equal(np.asarray(jitted.n_used), np.asarray(eager.n_used))

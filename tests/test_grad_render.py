@@ -224,3 +224,14 @@ def test_tabulated_values_built_inside_grad():
     # the traced construction gives the same table as the concrete one
     traced = jax.jit(lambda x: pr.TabulatedBRDF(u, v, x).features)(jnp.asarray(values))
     np.testing.assert_allclose(np.asarray(traced), np.asarray(concrete.features), atol=1e-15)
+
+
+def test_baseline_model_parameters():
+    """A baseline model (Cook-Torrance, ``f(params, u, v)``) through ParametricBRDF: derivatives w.r.t. its parameters."""
+    baselines = pytest.importorskip("baselines")
+
+    def scene(p):
+        brdf = pr.ParametricBRDF(baselines.cook_torrance, p)
+        return pr.Scene(_camera(), [pr.Sphere(brdf)], [pr.PointLight((2.0, 2.0, 4.0), 24.0)])
+
+    _check(_loss(scene), [0.3, 0.2, 0.3, 0.1])
