@@ -151,8 +151,9 @@ def pool_indices(env: EnvironmentLight, n: int, seed: int = 0):
     respect to the map's texels (for fixed sample positions and densities: the derivative of the
     estimator, an unbiased estimate of the derivative of the integral).
 
-    When the map's sampling tables are traced (the map was built inside ``jit``/``grad``), the pool is
-    drawn in JAX with ``jax.random`` instead (the same distribution, another random stream).
+    When the map's sampling tables are traced (the map was built inside ``jit``/``grad``, or passed into
+    ``jit`` as an argument), the pool is drawn in JAX with ``jax.random`` instead (the same distribution,
+    another random stream, so other pixels than an eager render's).
 
     Returns:
         ``(d, k, 1 / pdf)``: ``(n, 3)`` directions, ``(n,)`` flat pixel indices, ``(n,)`` inverse densities.

@@ -347,10 +347,12 @@ def _stage_finish(g, rad, width: int, height: int):
     return img.reshape(height, width, 3), g["hit"].reshape(height, width)
 
 
-def _radiance_pool(env, n, seed, dtype):
+def _radiance_pool(env, n, seed, dtype, tables=None):
     """``(directions, L / pdf)`` of :func:`pool_indices`, with ``L`` gathered from the map's own (possibly
-    traced) texels, so that the render differentiates with respect to them."""
-    d, k, inv_pdf = pool_indices(env, n, seed)
+    traced) texels, so that the render differentiates with respect to them. ``tables``: the map whose
+    sampling tables draw the pool (the scene's map before it was cast: concrete whenever the map was
+    built outside ``jit``, so a jitted render draws the same samples as an eager one)."""
+    d, k, inv_pdf = pool_indices(env if tables is None else tables, n, seed)
     radiance = env.image.reshape(-1, 3)[jnp.asarray(k)]
     return jnp.asarray(d, dtype), (radiance * jnp.asarray(inv_pdf, dtype)[:, None]).astype(dtype)
 
@@ -378,11 +380,12 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
     if int(spp) < 1:
         raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
     effects = Effects.all() if force_all_effects else plan_effects(scene)
+    tables = scene.environment
     scene = cast_floats(scene, dtype)
     pool = None
     if effects.environment:
         env = scene.environment if scene.environment is not None else _black_env(dtype)
-        pool = _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype)
+        pool = _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype, tables)
     bounces = max(scene.max_bounces, 1) if effects.indirect else 0
     sampled = effects.environment or effects.indirect
     seed_arr = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)

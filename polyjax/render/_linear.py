@@ -72,10 +72,11 @@ def light_samples(scene: Scene, target: int = 0, *, spp: int = 64, seed: int = 0
     if effects.indirect:
         raise InputError("scene: expected direct lighting only (max_bounces=0): with inter-reflections the "
                          "radiance is not linear in the target's BRDF")
+    tables = scene.environment
     scene = cast_floats(scene, dtype)
     env = scene.environment
     # the pool is drawn outside the compiled function, like the renderer's (the same samples)
-    pool = None if env is None else _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype)
+    pool = None if env is None else _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype, tables)
     return _light_samples(scene, pool, int(target), int(spp), int(seed), effects.shadows)
 
 
