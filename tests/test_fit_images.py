@@ -164,3 +164,11 @@ def test_fit_under_jit_equals_eager_fit():
     np.testing.assert_allclose(np.asarray(jitted.coefficients), np.asarray(eager.coefficients), rtol=0,
                                atol=1e-10 * float(jnp.max(jnp.abs(eager.coefficients))))
     assert np.array_equal(np.asarray(jitted.n_used), np.asarray(eager.n_used))
+
+
+def test_no_usable_pixel_is_flagged_not_raised():
+    scene = pr.Scene(pr.Camera(width=16, height=16), [pr.Sphere(pr.Lambertian())], [pr.PointLight()])
+    model = pj.fit_polynomial_to_images([scene], [np.full((16, 16, 3), np.nan)], degree=2)
+    assert np.all(np.asarray(model.status) == pj.FitStatus.NO_SAMPLES)
+    assert np.all(np.asarray(model.n_used) == 0) and np.all(np.isinf(np.asarray(model.l2)))
+    assert np.all(np.asarray(model.coefficients) == 0.0)
