@@ -14,6 +14,7 @@ from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
 from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
 from ._fit import fit_polynomial, n_parameters
+from ._fit_images import fit_polynomial_to_images
 from ._geometry import (
     cartesian_to_spherical,
     cos_theta,
@@ -41,9 +42,9 @@ __all__ = [
     "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs",
     "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error", "cartesian_to_spherical",
     "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
-    "fitted_design", "get_variables", "half_vector", "has_data_root", "is_concrete", "l2_error", "load_model",
-    "make_measurements", "model_kinds", "n_parameters", "n_terms", "prepare_inputs", "psnr", "raise_on_status",
-    "reflect", "register_model_kind", "register_variables", "render", "safe_normalize", "save_model",
-    "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
+    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial",
+    "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
+    "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
+    "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
+    "safe_normalize", "save_model", "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
 ]

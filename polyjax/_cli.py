@@ -1,4 +1,4 @@
-"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``.
+"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``, ``fit-images``.
 
 The paper's reproduction is a script of the repository, not a command: ``python benchmarks/reproduce.py``.
 """
@@ -248,6 +248,9 @@ def build_parser() -> argparse.ArgumentParser:
     else:
         rp = add_render_parser(sub, parents=[common])
         rp.set_defaults(func=run_render)
+        from .render._fit_cli import add_fit_images_parser
+
+        add_fit_images_parser(sub, parents=[common])
     return p
 
 

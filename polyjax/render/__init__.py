@@ -3,7 +3,12 @@
 Any BRDF renders through one protocol, a callable ``f(u, v) -> (..., 3)`` (light ``u``, view
 ``v``, local frame with normal ``+z``): fitted :class:`polyjax.PolynomialBRDF` s (via
 :func:`rgb_brdf`), measured samples (:class:`TabulatedBRDF`), analytic BRDFs
-(:class:`Lambertian`, :class:`Phong`) and ``polyjax.data.NeuralBRDF``.
+(:class:`Lambertian`, :class:`Phong`, :class:`ParametricBRDF`) and ``polyjax.data.NeuralBRDF``.
+
+Scenes can be built inside ``jit``/``grad``; renders differentiate with respect to BRDF parameters,
+lights and environment texels (:mod:`polyjax.render._integrator`). :func:`light_samples` writes a
+render as a linear function of one object's BRDF (behind ``polyjax.fit_polynomial_to_images``);
+:func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``).
 
 Typical use::
 
@@ -12,17 +17,20 @@ Typical use::
     write_exr("sphere.exr", result.image); write_png("sphere.png", result.image)
 """
 
-from ._brdf import BRDF, ChannelsFirst, Lambertian, Phong, SwapUV, TabulatedBRDF, evaluate_rgb, rgb_brdf
-from ._envmap import EnvironmentLight, load_envmap, procedural_sky, sample_pool
+from ._brdf import BRDF, ChannelsFirst, Lambertian, ParametricBRDF, Phong, SwapUV, TabulatedBRDF, evaluate_rgb, rgb_brdf
+from ._envmap import EnvironmentLight, load_envmap, pool_indices, procedural_sky, sample_pool
 from ._grid import GridResult, render_grid, sphere_scene
 from ._image import comparison_figure, difference_images, mosaic, read_exr, to_srgb, write_exr, write_png
 from ._integrator import RenderResult, cast_floats, render
+from ._linear import LightSamples, light_samples, render_linear
+from ._mitsuba import RoughPlastic, mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba
 from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
     "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult", "Lambertian",
-    "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV", "TabulatedBRDF", "cast_floats",
-    "comparison_figure", "difference_images", "evaluate_rgb", "load_envmap", "mosaic", "plan_effects",
-    "procedural_sky", "read_exr", "sample_pool", "render", "render_grid", "rgb_brdf", "sphere_scene", "to_srgb", "write_exr",
-    "write_png",
+    "LightSamples", "ParametricBRDF", "Phong", "Plane", "PointLight", "RenderResult", "RoughPlastic", "Scene", "Sphere",
+    "SwapUV", "TabulatedBRDF", "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb",
+    "light_samples", "load_envmap", "mitsuba_bsdf_eval", "mitsuba_roughplastic", "mitsuba_scene_dict", "mosaic",
+    "plan_effects", "pool_indices", "procedural_sky", "read_exr", "render", "render_grid", "render_linear",
+    "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
 ]

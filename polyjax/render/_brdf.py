@@ -114,6 +114,25 @@ def rgb_brdf(model) -> BRDF:
     return model
 
 
+class ParametricBRDF(eqx.Module):
+    """A BRDF given as a function of parameters: ``f(u, v) = fn(params, u, v)``.
+
+    ``params`` is any pytree of arrays (the pytree leaves of this module), so ``jax.grad`` of a
+    render with respect to a scene holding this BRDF gives the derivative with respect to them
+    (e.g. ``eqx.filter_grad``, or build the scene inside the differentiated function).
+
+    Attributes:
+        fn: ``fn(params, u, v) -> (..., 3)`` or ``(...)`` (static).
+        params: the parameters.
+    """
+
+    fn: Callable = eqx.field(static=True)
+    params: object
+
+    def __call__(self, u: Array, v: Array) -> Array:
+        return self.fn(self.params, u, v)
+
+
 class Lambertian(eqx.Module):
     r"""The ideal diffuse BRDF ``f = albedo / pi`` (above the horizon, 0 below).
 
@@ -193,6 +212,9 @@ class TabulatedBRDF(eqx.Module):
         isotropic: use the rotation-invariant parametrisation.
         eps: regulariser of the weights (squared feature distance).
         """
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((u, v, values))):
+            self._init_traced(u, v, values, k, isotropic, eps)
+            return
         u = np.asarray(u, dtype=float)
         v = np.asarray(v, dtype=float)
         b = np.asarray(values, dtype=float)
@@ -219,6 +241,35 @@ class TabulatedBRDF(eqx.Module):
         self.isotropic = bool(isotropic)
         self.eps = float(eps)
 
+    def _init_traced(self, u, v, values, k, isotropic, eps):
+        """Inside ``jit``/``grad``: shapes are checked, every sample is kept (non-finite ones are not dropped,
+        which would need their count), and the table stays differentiable in ``u``, ``v`` and ``values``."""
+        u, v, b = jnp.asarray(u), jnp.asarray(v), jnp.asarray(values)
+        if u.ndim != 2 or u.shape[-1] != 3 or v.shape != u.shape:
+            raise InputError(f"u, v: expected two (n, 3) arrays of the same shape, found {u.shape} and {v.shape}")
+        n = u.shape[0]
+        if b.shape == (n,):
+            b = jnp.repeat(b[:, None], 3, axis=1)
+        elif b.shape == (3, n) and b.shape != (n, 3):
+            b = b.T
+        elif b.shape != (n, 3):
+            raise InputError(f"values: expected (n,), (n, 3) or (3, n) with n = {n}, found {b.shape}")
+        u, _ = safe_normalize(u)
+        v, _ = safe_normalize(v)
+        fa = self._features_jnp(u, v, isotropic)
+        fb = self._features_jnp(v, u, isotropic)
+        self.features = jnp.concatenate([fa, fb])
+        self.values = jnp.concatenate([b, b])
+        self.k = int(min(max(k, 1), 2 * n))
+        self.isotropic = bool(isotropic)
+        self.eps = float(eps)
+
+    @staticmethod
+    def _features_jnp(u, v, isotropic):
+        if isotropic:
+            return jnp.stack([u[:, 2], v[:, 2], jnp.sum(u * v, axis=1)], axis=1)
+        return jnp.concatenate([u, v], axis=1)
+
     @staticmethod
     def _features_np(u, v, isotropic):
         if isotropic:
@@ -243,4 +294,6 @@ class TabulatedBRDF(eqx.Module):
         return jnp.where(_above(u, v)[..., None], f, 0.0)
 
 
-__all__ = ["BRDF", "ChannelsFirst", "Lambertian", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf"]
+__all__ = [
+    "BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf",
+]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -44,6 +45,9 @@ class EnvironmentLight(eqx.Module):
         image: ``(H, W, 3)`` latitude-longitude radiance map (non-negative, finite).
         scale: multiplies the radiance.
         """
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((image, scale))):
+            self._init_traced(image, scale)
+            return
         img = np.asarray(image, dtype=float)
         if img.ndim == 2:
             img = np.repeat(img[..., None], 3, axis=-1)
@@ -63,6 +67,30 @@ class EnvironmentLight(eqx.Module):
         self.image = jnp.asarray(img)
         self.pmf = jnp.asarray(pmf)
         self.cdf = jnp.asarray(cdf)
+
+    def _init_traced(self, image, scale):
+        """Inside ``jit``/``grad``: shape checks only; the sampling tables are computed in JAX from the
+        radiance with its derivative stopped (the estimator's samples and densities are fixed; the
+        radiance ``L`` they weight stays differentiable)."""
+        img = jnp.asarray(image)
+        if not jnp.issubdtype(img.dtype, jnp.floating):
+            img = img.astype(jnp.result_type(float))
+        if img.ndim == 2:
+            img = jnp.repeat(img[..., None], 3, axis=-1)
+        if img.ndim != 3 or img.shape[-1] != 3 or img.shape[0] < 1 or img.shape[1] < 1:
+            raise InputError(f"image: expected an (H, W, 3) latitude-longitude map, found shape {img.shape}")
+        img = img * scale
+        h, w, _ = img.shape
+        theta = (jnp.arange(h) + 0.5) * jnp.pi / h
+        lum = jax.lax.stop_gradient(img) @ jnp.asarray(_LUMA, img.dtype)
+        weight = jnp.maximum(lum, 0.0) * jnp.sin(theta)[:, None]
+        total = jnp.sum(weight)
+        weight = jnp.where(total > 0, weight, jnp.broadcast_to(jnp.sin(theta)[:, None], (h, w)))
+        pmf = (weight / jnp.sum(weight)).reshape(-1)
+        cdf = jnp.cumsum(pmf).at[-1].set(1.0)
+        self.image = img
+        self.pmf = pmf
+        self.cdf = cdf
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -99,17 +127,40 @@ class EnvironmentLight(eqx.Module):
 
 
 def sample_pool(env: EnvironmentLight, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Draw ``n`` importance samples of ``env`` once (see :func:`pool_indices`).
+
+    Returns:
+        ``(d, L / pdf)``: ``(n, 3)`` directions and ``(n, 3)`` radiance over density.
+    """
+    d, k, inv_pdf = pool_indices(env, n, seed)
+    img = jnp.asarray(env.image).reshape(-1, 3)
+    if isinstance(k, np.ndarray) and not isinstance(env.image, jax.core.Tracer):
+        return d, np.asarray(img, dtype=np.float64)[k] * inv_pdf[:, None]
+    return d, img[k] * inv_pdf[:, None]
+
+
+def pool_indices(env: EnvironmentLight, n: int, seed: int = 0):
     """Draw ``n`` importance samples of ``env`` once, in float64 numpy (see :meth:`EnvironmentLight.sample`).
 
     The renderer draws a pool like this per render and lets each pixel use its own pseudo-random
     subset of it: no random-number generation or trigonometry per pixel and sample, and the same
     arithmetic whatever else the render computes.
 
+    The radiance is not part of the pool: a sample is the map pixel ``k`` it came from and
+    ``1 / pdf``, and the renderer weights it by ``L_k`` itself, so the render is differentiable with
+    respect to the map's texels (for fixed sample positions and densities: the derivative of the
+    estimator, an unbiased estimate of the derivative of the integral).
+
+    When the map's sampling tables are traced (the map was built inside ``jit``/``grad``, or passed into
+    ``jit`` as an argument), the pool is drawn in JAX with ``jax.random`` instead (the same distribution,
+    another random stream, so other pixels than an eager render's).
+
     Returns:
-        ``(d, L / pdf)``: ``(n, 3)`` directions and ``(n, 3)`` radiance over density.
+        ``(d, k, 1 / pdf)``: ``(n, 3)`` directions, ``(n,)`` flat pixel indices, ``(n,)`` inverse densities.
     """
-    img = np.asarray(env.image, dtype=np.float64)
-    h, w, _ = img.shape
+    h, w, _ = env.image.shape
+    if isinstance(env.pmf, jax.core.Tracer):
+        return _pool_traced(env, n, seed)
     pmf = np.asarray(env.pmf, dtype=np.float64)
     cdf = np.cumsum(pmf)
     cdf /= cdf[-1]
@@ -125,7 +176,27 @@ def sample_pool(env: EnvironmentLight, n: int, seed: int = 0) -> tuple[np.ndarra
     d = np.stack([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)], axis=-1)
     p = pmf[k]
     inv_pdf = np.where(p > 0, 2 * np.pi**2 * st / (np.where(p > 0, p, 1.0) * h * w), 0.0)
-    return d, img[i, j] * inv_pdf[:, None]
+    return d, k, inv_pdf
+
+
+def _pool_traced(env: EnvironmentLight, n: int, seed: int):
+    h, w, _ = env.image.shape
+    dtype = env.pmf.dtype
+    pmf = jax.lax.stop_gradient(env.pmf)
+    cdf = jnp.cumsum(pmf)
+    cdf = cdf / cdf[-1]
+    k0, k1, k2, k3 = jax.random.split(jax.random.PRNGKey(seed), 4)
+    x0 = (jnp.arange(n, dtype=dtype) + jax.random.uniform(k0, (n,), dtype)) / n
+    k = jnp.clip(jnp.searchsorted(cdf, x0, side="right"), 0, h * w - 1)
+    k = k[jax.random.permutation(k1, n)]
+    i, j = k // w, k % w
+    theta = (i + jax.random.uniform(k2, (n,), dtype)) * jnp.pi / h
+    phi = (j + jax.random.uniform(k3, (n,), dtype)) * 2 * jnp.pi / w - jnp.pi
+    st = jnp.sin(theta)
+    d = jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], axis=-1)
+    p = pmf[k]
+    inv_pdf = jnp.where(p > 0, 2 * jnp.pi**2 * st / (jnp.where(p > 0, p, 1.0) * h * w), 0.0)
+    return d, k, inv_pdf
 
 
 def load_envmap(path: str | os.PathLike, scale: float = 1.0) -> EnvironmentLight:
@@ -162,4 +233,4 @@ def procedural_sky(height: int = 64, width: int = 128, sun_elevation_deg: float 
     return EnvironmentLight(img)
 
 
-__all__ = ["EnvironmentLight", "load_envmap", "procedural_sky", "sample_pool"]
+__all__ = ["EnvironmentLight", "load_envmap", "pool_indices", "procedural_sky", "sample_pool"]

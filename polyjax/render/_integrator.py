@@ -24,6 +24,14 @@ Each term is computed only if :func:`polyjax.render.plan_effects` says it exists
 Each effect is its own compiled stage (primary rays, point lights, environment, occlusion,
 indirect, compositing), called only when the effect is on.
 
+**Derivatives.** Every term is differentiable (``jax.grad``, ``jax.jvp``, ``vmap`` of them, under
+``jit``) with respect to the BRDFs' parameters (polynomial coefficients, any BRDF module's arrays,
+neural weights, tabulated values), light intensities, irradiances, positions and directions, and
+environment-map texels; scenes can be built inside the differentiated function. Visibility
+(``V``) is piecewise constant: a moving shadow edge has no derivative. Environment samples and
+their densities are held fixed (drawn from the map's sampling tables): the derivative with respect
+to a texel is that of the estimator, an unbiased estimate of the integral's derivative.
+
 ``force_all_effects=True`` computes every term whatever the scene (a black environment map when
 there is none, shadow rays, one indirect bounce at least); on a scene where the extra terms
 contribute nothing the pixels are identical: the shared terms come from the same compiled code
@@ -41,7 +49,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
 from ._brdf import evaluate_rgb
-from ._envmap import EnvironmentLight, sample_pool
+from ._envmap import EnvironmentLight, pool_indices
 from ._scene import DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
@@ -339,6 +347,16 @@ def _stage_finish(g, rad, width: int, height: int):
     return img.reshape(height, width, 3), g["hit"].reshape(height, width)
 
 
+def _radiance_pool(env, n, seed, dtype, tables=None):
+    """``(directions, L / pdf)`` of :func:`pool_indices`, with ``L`` gathered from the map's own (possibly
+    traced) texels, so that the render differentiates with respect to them. ``tables``: the map whose
+    sampling tables draw the pool (the scene's map before it was cast: concrete whenever the map was
+    built outside ``jit``, so a jitted render draws the same samples as an eager one)."""
+    d, k, inv_pdf = pool_indices(env if tables is None else tables, n, seed)
+    radiance = env.image.reshape(-1, 3)[jnp.asarray(k)]
+    return jnp.asarray(d, dtype), (radiance * jnp.asarray(inv_pdf, dtype)[:, None]).astype(dtype)
+
+
 def _black_env(dtype):
     return cast_floats(EnvironmentLight(np.zeros((8, 16, 3))), dtype)
 
@@ -362,11 +380,12 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
     if int(spp) < 1:
         raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
     effects = Effects.all() if force_all_effects else plan_effects(scene)
+    tables = scene.environment
     scene = cast_floats(scene, dtype)
     pool = None
     if effects.environment:
         env = scene.environment if scene.environment is not None else _black_env(dtype)
-        pool = tuple(jnp.asarray(a, dtype) for a in sample_pool(env, _pool_size(int(spp)), int(seed)))
+        pool = _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype, tables)
     bounces = max(scene.max_bounces, 1) if effects.indirect else 0
     sampled = effects.environment or effects.indirect
     seed_arr = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)

@@ -4,6 +4,10 @@ World frame: right-handed, ``+y`` up. Each object carries its BRDF (a callable
 ``f(u, v) -> (..., 3)``, see :mod:`polyjax.render._brdf`) and defines the local shading frame
 ``(t, b, n)`` in which the BRDF is evaluated: ``n`` the outward normal, ``t`` a tangent (the
 BRDF's ``+x``), ``b = n x t``.
+
+Every class here can be built inside a traced function (``jax.jit``, ``jax.grad``, ``jax.vmap``):
+traced arguments are checked from their shapes only (value checks such as "finite" or "positive
+radius" apply when the values are concrete) and stay differentiable.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -19,13 +24,38 @@ from .._errors import InputError
 from ._brdf import BRDF, rgb_brdf
 
 
+def _traced(*xs) -> bool:
+    """True when any leaf of ``xs`` is a JAX tracer (the object is being built inside ``jit``/``grad``/``vmap``)."""
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(xs))
+
+
+def _float(x) -> Array:
+    a = jnp.asarray(x)
+    return a if jnp.issubdtype(a.dtype, jnp.floating) else a.astype(jnp.result_type(float))
+
+
 def _vec3(x, name) -> Array:
+    """:func:`_np3` as a JAX array."""
+    a = _np3(x, name)
+    return a if isinstance(a, jax.Array) else jnp.asarray(a)
+
+
+def _np3(x, name):
+    """A 3-vector (a scalar is repeated). Concrete values are checked for shape and finiteness; traced values
+    (inside ``jit``/``grad``) are checked for shape only and kept as they are, so that they stay differentiable."""
+    if _traced(x):
+        a = _float(jnp.stack([_float(c) for c in x]) if isinstance(x, (list, tuple)) else x)
+        if a.shape == ():
+            a = jnp.broadcast_to(a, (3,))
+        if a.shape != (3,):
+            raise InputError(f"{name}: expected a 3-vector (or scalar), found an array of shape {a.shape}")
+        return a
     a = np.asarray(x, dtype=float)
     if a.shape == ():
         a = np.full((3,), float(a))
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise InputError(f"{name}: expected a finite 3-vector (or scalar), found {np.asarray(x).tolist()!r}")
-    return jnp.asarray(a)
+    return a
 
 
 class Camera(eqx.Module):
@@ -51,15 +81,14 @@ class Camera(eqx.Module):
                  ortho_height: float = 0.0):
         if int(width) < 1 or int(height) < 1:
             raise InputError(f"width, height: expected positive pixel counts, found {width} x {height}")
-        if not 0.0 < float(fov_deg) < 180.0:
+        if not _traced(fov_deg) and not 0.0 < float(fov_deg) < 180.0:
             raise InputError(f"fov_deg: expected a field of view in (0, 180) degrees, found {fov_deg}")
-        self.eye = _vec3(eye, "eye")
-        self.target = _vec3(target, "target")
-        self.up = _vec3(up, "up")
-        if np.linalg.norm(np.cross(np.asarray(self.target - self.eye), np.asarray(self.up))) < 1e-9:
+        eye, target, up = _np3(eye, "eye"), _np3(target, "target"), _np3(up, "up")
+        if not _traced(eye, target, up) and np.linalg.norm(np.cross(target - eye, up)) < 1e-9:
             raise InputError("up: expected a direction not parallel to the viewing direction target - eye")
-        self.fov_deg = jnp.asarray(float(fov_deg))
-        self.ortho_height = jnp.asarray(float(ortho_height))
+        self.eye, self.target, self.up = jnp.asarray(eye), jnp.asarray(target), jnp.asarray(up)
+        self.fov_deg = _float(fov_deg) if _traced(fov_deg) else jnp.asarray(float(fov_deg))
+        self.ortho_height = _float(ortho_height) if _traced(ortho_height) else jnp.asarray(float(ortho_height))
         self.width = int(width)
         self.height = int(height)
 
@@ -92,10 +121,10 @@ class Sphere(eqx.Module):
     brdf: BRDF
 
     def __init__(self, brdf, center: ArrayLike = (0.0, 0.0, 0.0), radius: float = 1.0):
-        if not float(radius) > 0:
+        if not _traced(radius) and not float(radius) > 0:
             raise InputError(f"radius: expected a positive radius, found {radius}")
         self.center = _vec3(center, "center")
-        self.radius = jnp.asarray(float(radius))
+        self.radius = _float(radius) if _traced(radius) else jnp.asarray(float(radius))
         self.brdf = rgb_brdf(brdf)
 
 
@@ -109,9 +138,19 @@ class Plane(eqx.Module):
 
     def __init__(self, brdf, height: float = -1.0, normal: ArrayLike = (0.0, 1.0, 0.0),
                  tangent: ArrayLike = (1.0, 0.0, 0.0)):
-        n = np.asarray(_vec3(normal, "normal"))
+        if _traced(normal, tangent, height):
+            n = _vec3(normal, "normal")
+            n = n / jnp.linalg.norm(n)
+            t = _vec3(tangent, "tangent")
+            t = t - n * (t @ n)
+            self.normal = n
+            self.offset = _float(height)
+            self.tangent = t / jnp.linalg.norm(t)
+            self.brdf = rgb_brdf(brdf)
+            return
+        n = _np3(normal, "normal")
         n = n / np.linalg.norm(n)
-        t = np.asarray(_vec3(tangent, "tangent"))
+        t = _np3(tangent, "tangent")
         t = t - n * (t @ n)
         if np.linalg.norm(t) < 1e-9:
             raise InputError("tangent: expected a direction not parallel to the plane normal")
@@ -128,7 +167,12 @@ class DirectionalLight(eqx.Module):
     irradiance: Float[Array, "3"]
 
     def __init__(self, direction: ArrayLike = (0.0, 0.0, 1.0), irradiance: ArrayLike = 1.0):
-        d = np.asarray(_vec3(direction, "direction"))
+        if _traced(direction):  # normalised in JAX; the derivative of d / |d| flows back to ``direction``
+            d = _vec3(direction, "direction")
+            self.direction = d / jnp.linalg.norm(d)
+            self.irradiance = _vec3(irradiance, "irradiance")
+            return
+        d = _np3(direction, "direction")
         if np.linalg.norm(d) == 0:
             raise InputError("direction: expected a non-zero vector")
         self.direction = jnp.asarray(d / np.linalg.norm(d))

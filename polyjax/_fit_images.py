@@ -1,0 +1,245 @@
+r"""Fitting the polynomial BRDF straight from photographs: one closed-form weighted least-squares solve.
+
+For a scene with known geometry, camera and lights, the radiance of a pixel that sees the target
+object is linear in its BRDF (:mod:`polyjax.render._linear`): ``L = sum_j c_j f(u_j, v)``. With
+the polynomial of equation (3), ``f = sum_i beta_i B_i(u, v)``, every kept pixel is one row of a
+linear system in ``beta``,
+
+.. math::
+    L_{c} = \sum_i \beta_{c,i} \Big(\sum_j c_{j,c}\, B_i(u_j, v)\Big),
+
+per colour channel ``c``: under one point or directional light the row is ``E cos(theta_u) B(u, v)``
+(one observation ``f(u, v) E``), under an environment map a known weighted sum of basis values.
+No initial guess, no iteration: the same basis, PCA and solver as :func:`polyjax.fit_polynomial`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import ArrayLike
+
+from ._basis import BASES
+from ._design import fitted_design as _design_for
+from ._errors import InputError
+from ._lstsq import METHODS, weighted_lstsq
+from ._model import FitStatus, PolynomialBRDF
+from ._variables import get_variables
+
+
+def _concrete(x) -> bool:
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
+
+
+def fit_polynomial_to_images(
+    scenes: Sequence,
+    images: Sequence[ArrayLike] | ArrayLike,
+    variables: str = "lafortune",
+    degree: int = 5,
+    *,
+    target: int = 0,
+    pixel_weights: Sequence[ArrayLike] | ArrayLike | None = None,
+    saturation: float | None = None,
+    cutoff_deg: float | None = 80.0,
+    spp: int = 64,
+    seed: int = 0,
+    basis: str = "legendre",
+    interactions: bool = False,
+    method: str = "qr",
+    rcond: float | None = None,
+) -> PolynomialBRDF:
+    r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting.
+
+    Minimises, per colour channel, ``sum_pixels w_px (I_px - L_px(beta))^2`` over the kept pixels of
+    every image, where ``L_px(beta)`` is the render of the polynomial (linear in ``beta``, see the
+    module notes): a single weighted least-squares solve (:func:`polyjax.weighted_lstsq`, QR then SVD).
+
+    **Pixels kept**: those whose primary ray hits object ``target``, with finite values in all three
+    channels, no channel at or above ``saturation``, lit (some light weight ``> 0``), not in the
+    shadow of any point or directional light that faces them (a partly shadowed pixel is excluded,
+    as are its shadow edges), with ``theta_v`` and every lit point light's ``theta_u`` within
+    ``cutoff_deg`` (grazing pixels have the least reliable normals and footprints; the same 80-degree
+    cutoff as :func:`polyjax.fit_polynomial`).
+
+    **Pixel weighting**: residuals are measured in radiance, the quantity the images hold, with weight
+    ``w_px`` (``pixel_weights``, 1 by default): the maximum-likelihood fit for pixel noise of constant
+    variance, and the fit that maximises the PSNR of re-renders. In BRDF terms a point-light pixel's
+    residual is ``E cos(theta_u) (b - f)``, so the weight on squared BRDF residuals is
+    ``(I / r^2)^2 cos^2(theta_u)``: for lights at a fixed distance, the ``cos^2(theta_u)`` weighting of
+    the Ngan et al. objective (equation (11)) that ``fit_polynomial`` minimises, with the sphere's
+    pixels as the samples. Give each image a weight ``1 / sigma^2`` (its noise) through ``pixel_weights``.
+
+    The principal components and the ``[-1, 1]`` scaling are those of the explanatory variables of
+    every (pixel, light sample) pair that enters the fit, as in ``fit_polynomial``.
+
+    Differentiable (under ``jit``) with respect to the images, the pixel weights and the scenes' lights
+    and environment texels, through :func:`polyjax.weighted_lstsq`'s derivative; the pixel selection is
+    piecewise constant.
+
+    Args:
+        scenes: a :class:`polyjax.render.Scene` or a sequence of them, one per image; the BRDF of the
+            target object is a placeholder (not used). Direct lighting only (``max_bounces=0``).
+        images: ``(H, W, 3)`` linear RGB radiance per scene (a sequence, or an array ``(n, H, W, 3)``).
+        variables: explanatory variables (as in :func:`polyjax.fit_polynomial`).
+        degree: the polynomial degree ``p`` (one integer).
+        target: index of the fitted object in each scene's ``objects``.
+        pixel_weights: ``(H, W)`` non-negative weights per image (or a scalar per image), 1 by default.
+        saturation: pixels with a channel at or above this value are excluded (the clipping level of
+            the camera); None keeps every finite pixel.
+        cutoff_deg: grazing cutoff in degrees; None keeps every pixel above the horizon.
+        spp: environment samples per pixel of the design (scenes with an environment map).
+        seed: random seed of the environment samples.
+        basis, interactions, method, rcond: as in :func:`polyjax.fit_polynomial`.
+
+    Returns:
+        :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any
+        fitted model. ``l2`` holds the root-mean-square radiance residual over the kept pixels (image
+        units, not equation (11)); ``n_used`` the number of kept pixels; ``status`` ``NO_SAMPLES`` when
+        no pixel was kept and ``RANK_DEFICIENT`` when the pixels do not determine every coefficient.
+
+    Raises:
+        InputError: scenes/images disagree in number or size, an image is not ``(H, W, 3)``, bad options,
+            or a scene with inter-reflections.
+    """
+    from .render._linear import light_samples
+    from .render._scene import Scene
+
+    scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
+    if not scenes:
+        raise InputError("scenes: expected at least one polyjax.render.Scene")
+    for i, s in enumerate(scenes):
+        if not isinstance(s, Scene):
+            raise InputError(f"scenes[{i}]: expected a polyjax.render.Scene, found {type(s).__name__}")
+    if isinstance(images, (list, tuple)):
+        images = list(images)
+    else:
+        arr = jnp.asarray(images)
+        images = [arr] if arr.ndim == 3 else list(arr)
+    if len(images) != len(scenes):
+        raise InputError(f"images: expected one image per scene ({len(scenes)}), found {len(images)}")
+    vs = get_variables(variables)
+    if basis not in BASES:
+        raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
+    if method not in METHODS:
+        raise InputError(f"method: expected one of {METHODS}, found {method!r}")
+    if np.ndim(degree) != 0 or int(degree) != degree or int(degree) < 0:
+        raise InputError(f"degree: expected one non-negative integer, found {degree!r}")
+    if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
+        raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
+    if int(spp) < 1:
+        raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
+    degree = int(degree)
+    if pixel_weights is None:
+        pixel_weights = [None] * len(scenes)
+    elif not isinstance(pixel_weights, (list, tuple)):
+        pw = jnp.asarray(pixel_weights)
+        pixel_weights = list(pw) if pw.ndim in (1, 3) else [pw] * len(scenes)
+    if len(pixel_weights) != len(scenes):
+        raise InputError(f"pixel_weights: expected one entry per scene ({len(scenes)}), found {len(pixel_weights)}")
+
+    dtype = jnp.result_type(float)
+    vl, ul, cw, point, keep, y, wpx = [], [], [], [], [], [], []
+    for i, (scene, img, pw) in enumerate(zip(scenes, images, pixel_weights)):
+        img = jnp.asarray(img)
+        h, w = scene.camera.height, scene.camera.width
+        if img.shape != (h, w, 3):
+            raise InputError(f"images[{i}]: expected linear RGB of shape ({h}, {w}, 3) (its scene's camera), "
+                             f"found {img.shape}")
+        if not jnp.issubdtype(img.dtype, jnp.floating):
+            img = img.astype(dtype)
+        img = img.astype(dtype).reshape(-1, 3)
+        pw = jnp.ones((h * w,), dtype) if pw is None else jnp.broadcast_to(jnp.asarray(pw, dtype), (h, w)).reshape(-1)
+        if _concrete(pw) and (not np.all(np.isfinite(np.asarray(pw))) or np.any(np.asarray(pw) < 0)):
+            raise InputError(f"pixel_weights[{i}]: expected finite, non-negative weights")
+        ls = light_samples(scene, target, spp=spp, seed=seed, dtype=dtype)
+        ok = ls.on_target & ~ls.shadowed & jnp.all(jnp.isfinite(img), axis=-1) & (pw > 0)
+        if saturation is not None:
+            ok = ok & jnp.all(img < saturation, axis=-1)
+        lit = jnp.sum(ls.weight, axis=-1) > 0  # (N, J)
+        ok = ok & jnp.any(lit, axis=-1) & (ls.v[:, 2] > 0)
+        if cutoff_deg is not None:
+            c = jnp.cos(jnp.deg2rad(cutoff_deg))
+            grazing = jnp.any(lit & ls.is_point[None, :] & (ls.u[..., 2] < c), axis=-1)
+            ok = ok & (ls.v[:, 2] >= c) & ~grazing
+        vl.append(ls.v)
+        ul.append(ls.u)
+        cw.append(ls.weight)
+        point.append(ls.is_point)
+        keep.append(ok)
+        y.append(img)
+        wpx.append(pw)
+    n_j = max(u.shape[1] for u in ul)
+    pad = lambda a: jnp.pad(a, ((0, 0), (0, n_j - a.shape[1]), (0, 0)))  # noqa: E731  (zero weight: no light)
+    v = jnp.concatenate(vl)
+    u = jnp.concatenate([pad(a) for a in ul])
+    c = jnp.concatenate([pad(a) for a in cw])
+    keep = jnp.concatenate(keep)
+    y = jnp.where(keep[:, None], jnp.concatenate(y), 0.0)
+    wpx = jnp.where(keep, jnp.concatenate(wpx), 0.0)
+    c = jnp.where(keep[:, None, None], c, 0.0)
+    shared = False
+    if _concrete((keep, c)):
+        # concrete selection: solve on the kept pixels only, and with one design for the three channels
+        # when every light is grey (the same weights in R, G and B)
+        idx = np.flatnonzero(np.asarray(keep))
+        if idx.size:
+            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
+        cn = np.asarray(c)
+        shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
+    return _solve(u, v, c, y, wpx, keep, variables=vs.name, degree=degree, basis=basis, interactions=bool(interactions),
+                  method=method, rcond=rcond, shared=shared)
+
+
+@functools.partial(
+    jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond", "shared")
+)
+def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond, shared) -> PolynomialBRDF:
+    """The design of equation (3) summed over light samples, and one weighted solve per channel (one solve
+    with three right-hand sides when ``shared``: every light weight is the same in R, G and B)."""
+    n, n_j, _ = u.shape
+    lit = keep[:, None] & (jnp.sum(c, axis=-1) > 0)  # (N, J): the (pixel, light) pairs in the fit
+    safe_u = jnp.where(lit[..., None], u, jnp.asarray([0.0, 0.0, 1.0], u.dtype))
+    safe_v = jnp.where(keep[:, None], v, jnp.asarray([0.0, 0.0, 1.0], v.dtype))
+    x = get_variables(variables).fn(safe_u, safe_v[:, None, :])  # (N, J, k)
+    k = x.shape[-1]
+    pca, centre, hw, d = _design_for(x.reshape(n * n_j, k), lit.reshape(-1), degree, basis, interactions)
+    m = d.shape[-1]
+    d = jnp.where(lit.reshape(-1, 1), d, 0.0).reshape(n, n_j, m)
+    den = jnp.sum(wpx)
+
+    def rms_of(r):
+        ms = jnp.sum(wpx[:, None] * r * r, axis=0) / jnp.where(den > 0, den, 1.0)
+        return jnp.where(den > 0, jnp.sqrt(ms), jnp.inf)
+
+    if shared:
+        design = jnp.einsum("njm,nj->nm", d, c[..., 0])
+        sol = weighted_lstsq(design, y, wpx, method=method, rcond=rcond)
+        coef, rms = sol.coefficients.T, rms_of(y - design @ sol.coefficients)
+        rank, cond, n_act = (jnp.broadcast_to(a, (3,)) for a in (sol.rank, sol.condition, sol.n_active))
+    else:
+        design = jnp.einsum("njm,njc->cnm", d, c)  # (3, N, m): one design per channel
+
+        def channel(dc, yc):
+            sol = weighted_lstsq(dc, yc, wpx, method=method, rcond=rcond)
+            rms = rms_of((yc - dc @ sol.coefficients)[:, None])[0]
+            return sol.coefficients, rms, sol.rank, sol.condition, sol.n_active
+
+        coef, rms, rank, cond, n_act = jax.vmap(channel)(design, y.T)
+    n_used = jnp.sum(keep).astype(jnp.int32)
+    status = jnp.where(n_used == 0, FitStatus.NO_SAMPLES,
+                       jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)).astype(jnp.int32)
+    coef = jnp.where((n_used == 0), 0.0, coef)
+    three = lambda a: jnp.broadcast_to(a, (3,) + jnp.shape(a))  # noqa: E731
+    return PolynomialBRDF(
+        coefficients=coef, degree=jnp.full((3,), degree, jnp.int32), mean=three(pca.mean),
+        rotation=three(pca.rotation), centre=three(centre), halfwidth=three(hw), l2=rms, rank=rank, condition=cond,
+        n_used=jnp.full((3,), n_used), status=status, variables=variables, basis=basis, interactions=interactions,
+        max_degree=degree,
+    )
+
+
+__all__ = ["fit_polynomial_to_images"]
