@@ -72,7 +72,7 @@ def eigh(a):
     stays finite; the eigenspace (its projector ``V_T V_T^T``) and the sum of its eigenvalues are
     differentiated exactly, the individual tied eigenvalues and eigenvectors only when ``V_T^T dA V_T``
     is diagonal. The rule is linear in ``dA``, so ``grad`` and ``jacrev`` work (the factorisation
-    itself, :func:`jax.custom_batching.custom_vmap`, has no reverse mode of its own).
+    itself, :func:`jax.custom_batching.custom_vmap`, has no reverse mode of its own). First derivatives only.
     """
     return _eigh(a)
 

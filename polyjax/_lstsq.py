@@ -105,6 +105,8 @@ def weighted_lstsq(
     their value or design row is not finite. ``rank`` and ``n_active`` have zero (``float0``) tangents;
     ``singular_values`` and ``condition`` get their derivatives ``ds_k = u_k^T dA v_k`` of the equilibrated
     weighted design ``A`` (0 for singular values at or below the rank tolerance, and for ``condition = inf``).
+    First derivatives only: differentiating the rule again (``jax.hessian``) would differentiate the
+    factorisation, which has no rule of its own, and is not supported.
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, found {method!r}")
