@@ -106,9 +106,10 @@ def main(argv=None):
         print(f"{'':36s} {'compile s':>10s} {'median ms':>10s} {'x fit':>7s} {'min ms':>9s} {'x fit':>7s}")
         for name, compile_s, med, ratio, mn, min_ratio in rows:
             print(f"{name:36s} {compile_s:10.2f} {med * 1e3:10.3f} {ratio:7.2f} {mn * 1e3:9.3f} {min_ratio:7.2f}")
-        worst = max(r for name, _, _, r, _, _ in rows if name in ("grad w.r.t. values", "jvp along values"))
+        # the stricter of the two ratios (medians swing with the load of a shared machine, minima less)
+        worst = max(max(r, r_min) for name, _, _, r, _, r_min in rows[1:])
         verdict = "MET" if worst <= TARGET_CLOSED_FORM else "MISSED"
-        print(f"grad and jvp w.r.t. values: at most {worst:.2f}x the fit (medians)   "
+        print(f"every derivative above: at most {worst:.2f}x the fit (median or min ratio)   "
               f"[target <= {TARGET_CLOSED_FORM:.0f}x: {verdict}]")
     rows = nonlinear_rows(data, args.repeats)
     if not rows:
