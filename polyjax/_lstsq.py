@@ -67,7 +67,8 @@ def weighted_lstsq(
     Args:
         design: ``(n, m)`` design matrix.
         y: ``(n,)`` or ``(n, r)``: one or several right-hand sides sharing the design.
-        weights: ``(n,)`` non-negative weights on the squared residuals (0 drops a sample).
+        weights: ``(n,)`` non-negative weights on the squared residuals (0 drops a sample, and so does a
+            negative or NaN weight).
         active: ``(m,)`` bool, columns to use (others get coefficient 0); all when None.
         method: ``"qr"`` (QR, then SVD of ``R``) or ``"svd"`` (SVD of the weighted design).
         rcond: singular values below ``rcond * s_max`` count as zero; default ``eps * max(m, sqrt(n))``.
