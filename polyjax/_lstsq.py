@@ -229,11 +229,9 @@ def _solve_jvp(method, rcond, primals, tangents):
     # ds_k = u_k^T dA v_k: the part through the equilibration E is -s_k sum_j v_kj^2 de_j / e_j
     ds = ds - s * jnp.sum(vt * vt * (de / scale)[None, :], axis=1)
     ds = jnp.where(nonzero, ds, 0.0)
-    s0, smin = s[0], s[aux["i_min"]]
-    dcond = jnp.where(
-        aux["full"] & (smin > 0), condition * (ds[0] / jnp.where(s0 > 0, s0, 1.0) - ds[aux["i_min"]] / jnp.where(
-            smin > 0, smin, 1.0)), 0.0
-    )
+    s0, smin, full = s[0], s[aux["i_min"]], aux["full"]
+    rel = ds[0] / jnp.where(s0 > 0, s0, 1.0) - ds[aux["i_min"]] / jnp.where(smin > 0, smin, 1.0)
+    dcond = jnp.where(full, condition, 0.0) * rel  # d(s0 / smin); 0 where the condition number is inf
     int_zero = np.zeros((), jax.dtypes.float0)
     return out, (dcoef, int_zero, dcond, ds, int_zero)
 

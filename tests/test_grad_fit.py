@@ -151,6 +151,16 @@ def test_lstsq_singular_values_and_condition_tangents():
     np.testing.assert_allclose(np.asarray(jv), np.asarray(ref), rtol=1e-6, atol=1e-8)
     _, t_rank = jax.jvp(lambda d: pj.weighted_lstsq(d, y, w).rank, (d,), (td,))
     assert t_rank.dtype == jax.dtypes.float0
+    # rank-deficient (condition inf): every float output differentiates finite in reverse mode
+    d, y, w = (jnp.asarray(a) for a in _lstsq_problem("fewer-rows")[:3])
+    sol = pj.weighted_lstsq(d, y, w)
+    assert np.isinf(float(sol.condition))
+
+    def floats(d, y, w):
+        sol = pj.weighted_lstsq(d, y, w)
+        return sol.coefficients, sol.condition, sol.singular_values
+
+    assert _finite(jax.jacrev(floats, argnums=(0, 1, 2))(d, y, w))
 
 
 def test_lstsq_derivative_reuses_the_factorisation():
