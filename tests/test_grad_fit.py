@@ -370,3 +370,27 @@ def test_rank_deficient_fit_has_finite_minimum_norm_derivatives():
         ref = _central(g, x, t)
         np.testing.assert_allclose(np.asarray(jv), np.asarray(ref), rtol=0, atol=1e-7 * float(jnp.max(jnp.abs(ref))))
     assert _finite(jax.jacrev(lambda u: pj.fit_polynomial(u, v, y, weights=w, degree=5).coefficients)(u))
+
+
+def test_empty_lane_and_perfect_fit_do_not_poison_the_batch():
+    """A lane with every sample masked (L2 inf) and a lane fitted exactly (L2 0) beside a normal lane: the
+    Jacobian of the L2s is finite (sqrt at 0 gave NaN, which reached the shared u), 0 for those two lanes,
+    and the normal lane's row equals its fit alone. The same for l2_error."""
+    u, v = (jnp.asarray(a) for a in random_hemisphere(40, seed=3, min_cos=0.2))
+    b = 0.2 + v[:, 2] + 0.3 * u[:, 0] * v[:, 0]
+    values = jnp.stack([b, b, jnp.zeros_like(b)])
+    mask = jnp.asarray(np.arange(3)[:, None] != 1) & jnp.ones((3, 40), bool)
+
+    def l2(u, values):
+        return pj.fit_polynomial(u, v, values, degree=3, mask=mask).l2
+
+    l2s = l2(u, values)
+    assert np.isinf(float(l2s[1])) and float(l2s[2]) == 0.0 and float(l2s[0]) > 0
+    ju, jv = jax.jacrev(l2, argnums=(0, 1))(u, values)
+    assert _finite((ju, jv))
+    assert np.all(np.asarray(ju[1:]) == 0.0) and np.all(np.asarray(jv[1:]) == 0.0)
+    alone_u, alone_v = jax.jacrev(lambda u, b: pj.fit_polynomial(u, v, b, degree=3).l2, argnums=(0, 1))(u, b)
+    np.testing.assert_allclose(np.asarray(ju[0]), np.asarray(alone_u), rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(jv[0, 0]), np.asarray(alone_v), rtol=1e-9, atol=1e-14)
+    jm = jax.jacrev(lambda x: pj.l2_error(x, 0.1 + 0.0 * x, u, v, mask=mask))(values.at[2].set(0.1))
+    assert _finite(jm) and np.all(np.asarray(jm[1:]) == 0.0)
