@@ -19,6 +19,10 @@ orthogonality to machine precision provided ``cond(A) < ~ eps^{-1/2}`` (about ``
 polyjax's designs are column-equilibrated Legendre bases with condition numbers of a few hundred
 at most (``docs/robustness.md``), and :func:`tall_qr` falls back to Householder QR when the
 Cholesky factor shows trouble.
+
+Derivatives: :func:`eigh` has a rule of its own (first-order perturbation theory). :func:`qr_r`,
+:func:`svd` and :func:`tall_qr` have none and cannot be differentiated (``custom_vmap`` has no reverse
+mode); :func:`polyjax.weighted_lstsq` differentiates through its own rule, which reuses their factors.
 """
 
 from __future__ import annotations
