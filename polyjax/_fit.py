@@ -38,7 +38,10 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     def residual_l2(d, coef, y, wl, wc2l):  # coef (m,) ; y (n,)
         r = y - d @ coef
         den = jnp.sum(wl)
-        return jnp.where(den > 0, jnp.sqrt(jnp.sum(wc2l * r * r) / jnp.where(den > 0, den, 1.0)), jnp.inf)
+        num = jnp.sum(wc2l * r * r)
+        nz = (den > 0) & (num != 0)  # sqrt has no derivative at 0: an empty lane or a perfect fit gets 0, not NaN
+        l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
+        return jnp.where(den > 0, l2, jnp.inf)
 
     def lane(y, wl, wc2l):
         """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""

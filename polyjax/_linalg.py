@@ -19,6 +19,10 @@ orthogonality to machine precision provided ``cond(A) < ~ eps^{-1/2}`` (about ``
 polyjax's designs are column-equilibrated Legendre bases with condition numbers of a few hundred
 at most (``docs/robustness.md``), and :func:`tall_qr` falls back to Householder QR when the
 Cholesky factor shows trouble.
+
+Derivatives: :func:`eigh` has a rule of its own (first-order perturbation theory). :func:`qr_r`,
+:func:`svd` and :func:`tall_qr` have none and cannot be differentiated (``custom_vmap`` has no reverse
+mode); :func:`polyjax.weighted_lstsq` differentiates through its own rule, which reuses their factors.
 """
 
 from __future__ import annotations
@@ -56,9 +60,38 @@ def svd(a):
 
 
 @_sequential_under_vmap
-def eigh(a):
-    """Eigenvalues (ascending) and eigenvectors of the symmetric ``a``."""
+def _eigh(a):
     return tuple(jnp.linalg.eigh(a))
+
+
+@jax.custom_jvp
+def eigh(a):
+    r"""Eigenvalues (ascending) and eigenvectors of the symmetric ``a``, with a derivative rule.
+
+    Derivative (first-order perturbation theory, ``A = V diag(w) V^T``, ``dA`` symmetrised):
+    ``dw_i = v_i^T dA v_i`` and ``dV = V (F * (V^T dA V))`` with ``F_ij = 1 / (w_j - w_i)`` for
+    ``i != j``. Tied eigenvalues (``|w_i - w_j| <= sqrt(eps) max|w|``, e.g. two explanatory variables with
+    equal variance and no correlation) have no unique eigenvectors: ``F_ij = 0`` there, i.e. the basis of a
+    tied eigenspace is held fixed and only its mixing with the other eigenspaces moves. The derivative
+    stays finite; the eigenspace (its projector ``V_T V_T^T``) and the sum of its eigenvalues are
+    differentiated exactly, the individual tied eigenvalues and eigenvectors only when ``V_T^T dA V_T``
+    is diagonal. The rule is linear in ``dA``, so ``grad`` and ``jacrev`` work (the factorisation
+    itself, :func:`jax.custom_batching.custom_vmap`, has no reverse mode of its own). First derivatives only.
+    """
+    return _eigh(a)
+
+
+@eigh.defjvp
+def _eigh_jvp(primals, tangents):
+    (a,), (da,) = primals, tangents
+    w, v = _eigh(a)
+    da = 0.5 * (da + jnp.swapaxes(da, -1, -2))
+    vdv = v.T @ da @ v
+    gap = w[None, :] - w[:, None]
+    tol = jnp.sqrt(jnp.finfo(w.dtype).eps) * jnp.max(jnp.abs(w))
+    tied = jnp.abs(gap) <= tol  # includes the diagonal
+    f = jnp.where(tied, 0.0, 1.0 / jnp.where(tied, 1.0, gap))
+    return (w, v), (jnp.diagonal(vdv), v @ (f * vdv))
 
 
 def _chol_upper(g):

@@ -92,7 +92,9 @@ def l2_error(
     num = jnp.sum(wc2 * r * r, axis=-1)
     den = jnp.sum(jnp.broadcast_to(w, jnp.broadcast_shapes(w.shape, r.shape)), axis=-1)
     num = jnp.where(jnp.isnan(num), jnp.inf, num)
-    return jnp.where(den > 0, jnp.sqrt(num / jnp.where(den > 0, den, 1.0)), jnp.inf)
+    nz = (den > 0) & (num != 0)  # sqrt has no derivative at 0: no kept sample or a perfect fit gets 0, not NaN
+    l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
+    return jnp.where(den > 0, l2, jnp.inf)
 
 
 def psnr(

@@ -45,6 +45,18 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
 
     Returns:
         :class:`PCA`. With no kept sample the mean is 0 and the rotation the identity.
+
+    Differentiable (``jvp``, ``grad``, ``jacfwd``, ``jacrev``, ``vmap`` of them) with respect to ``x``
+    through :func:`polyjax._linalg.eigh`'s rule: ``d lambda_i = r_i^T dC r_i`` and
+    ``dr_i = sum_{j != i} r_j (r_j^T dC r_i) / (lambda_i - lambda_j)`` for the covariance ``C``; the sort and
+    the sign rule are piecewise constant. ``keep`` is a 0/1 selection and has no derivative. Tied
+    eigenvalues (within ``sqrt(eps)`` of the largest; e.g. two variables of equal variance and no
+    correlation, as when the samples are closed under swapping ``x`` and ``y`` and under mirroring ``u``)
+    leave the rotation inside their eigenspace undetermined: the derivative holds that rotation fixed
+    (the coupling term is set to 0), so it is finite, and exact for what does not depend on the rotation:
+    the eigenspace, the sum of its variances, and the L2 and values (not the coefficients) of a degree-1 fit
+    or of one with ``interactions=True``. A fit of degree > 1 without interactions depends on the rotation
+    and is not differentiable there (``docs/robustness.md``).
     """
     n, k = x.shape
     m = jnp.ones((n,), x.dtype) if keep is None else (jnp.asarray(keep) > 0).astype(x.dtype)
