@@ -17,12 +17,13 @@ from ._envmap import EnvironmentLight, load_envmap, procedural_sky, sample_pool
 from ._grid import GridResult, render_grid, sphere_scene
 from ._image import comparison_figure, difference_images, mosaic, read_exr, to_srgb, write_exr, write_png
 from ._integrator import RenderResult, cast_floats, render
+from ._sampling import ImportanceSampler, importance_sampler
 from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
-    "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult", "Lambertian",
-    "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV", "TabulatedBRDF", "cast_floats",
-    "comparison_figure", "difference_images", "evaluate_rgb", "load_envmap", "mosaic", "plan_effects",
-    "procedural_sky", "read_exr", "sample_pool", "render", "render_grid", "rgb_brdf", "sphere_scene", "to_srgb", "write_exr",
-    "write_png",
+    "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult",
+    "ImportanceSampler", "Lambertian", "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV",
+    "TabulatedBRDF", "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb", "importance_sampler",
+    "load_envmap", "mosaic", "plan_effects", "procedural_sky", "read_exr", "sample_pool", "render", "render_grid",
+    "rgb_brdf", "sphere_scene", "to_srgb", "write_exr", "write_png",
 ]

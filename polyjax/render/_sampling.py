@@ -196,10 +196,11 @@ class ImportanceSampler(eqx.Module):
         n = self.resolution
         j, t = self._node(v)
         jj = jnp.where(xi[..., 1] < t, jnp.minimum(j + 1, self.n_views - 1), j)
+        # row j of the stacked table holds j + cdf_j, in (j, j + 1]: one search over all rows
         cdf = jax.lax.stop_gradient(self.cdf).astype(xi.dtype)
-        cell = jax.vmap(lambda row, x: jnp.searchsorted(row, x, side="right"))(
-            cdf[jj.reshape(-1)], xi[..., 2].reshape(-1)).reshape(shape)
-        cell = jnp.clip(cell, 0, n * n - 1)
+        stacked = (cdf + jnp.arange(self.n_views, dtype=xi.dtype)[:, None]).reshape(-1)
+        flat = jnp.searchsorted(stacked, jj.astype(xi.dtype) + xi[..., 2], side="right")
+        cell = jnp.clip(flat - jj * (n * n), 0, n * n - 1)
         sq = jnp.stack([(cell % n + xi[..., 3]) / n, (cell // n + xi[..., 4]) / n], axis=-1)
         c, s = _azimuth(v)
         u_tab = _rotate_z(square_to_hemisphere(sq), c, s)
@@ -209,11 +210,16 @@ class ImportanceSampler(eqx.Module):
 
     def sample(self, key: PRNGKeyArray, v: Float[ArrayLike, "3"], n: int
                ) -> tuple[Float[Array, "n 3"], Float[Array, "n"]]:
-        """Draw ``n`` light directions for one view ``v`` (``(3,)``): ``(u (n, 3), pdf (n,))``."""
+        """Draw ``n`` light directions for one view ``v`` (``(3,)``): ``(u (n, 3), pdf (n,))``, compiled once per
+        ``n`` and dtype."""
         v = jnp.asarray(v)
-        dtype = v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else jnp.result_type(float)
-        xi = jax.random.uniform(key, (int(n), 5), dtype)
-        return self.warp(xi, v.astype(dtype))
+        dtype = v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else jnp.dtype(jnp.result_type(float))
+        return _sample(self, key, v.astype(dtype), int(n))
+
+
+@eqx.filter_jit
+def _sample(sampler, key, v, n):
+    return sampler.warp(jax.random.uniform(key, (n, 5), v.dtype), v)
 
 
 @eqx.filter_jit
