@@ -9,6 +9,7 @@ for fitting; polyjax does not change global JAX settings on import.
 
 from . import data
 from . import render
+from . import export
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._config import DATA_ENV, data_root, has_data_root
@@ -28,7 +29,7 @@ __version__ = "0.1.0"
 __all__ = [
     "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
     "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "UnknownNameError", "VariableSet",
-    "approximation_error", "cartesian_to_spherical", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
+    "approximation_error", "cartesian_to_spherical", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix", "export",
     "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
     "get_variables", "half_vector", "has_data_root", "l2_error", "load_model", "make_measurements", "n_parameters",
     "n_terms", "psnr", "reflect", "register_variables", "safe_normalize", "save_model", "spherical_to_cartesian",
