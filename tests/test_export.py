@@ -230,3 +230,33 @@ def test_mitsuba_samples_exact_chi2_baseline(view):
 def test_mitsuba_chi2_glossy_merl(view, tmp_path, monkeypatch):
     mi = _mitsuba("llvm_ad_rgb")
     _mitsuba_chi2(mi, glossy_polynomial(), view, tmp_path, monkeypatch)
+
+
+def test_mitsuba_sphere_matches_polyjax_render():
+    """A sphere under a directional light: Mitsuba (64 x 64, 256 spp, box filter) against polyjax's render
+    (8 x 8 supersampled pixel centres, averaged). The mirrored image must not match (the check can fail)."""
+    mi = _mitsuba("llvm_ad_rgb")
+    import polyjax.render as pr
+    from _render_problems import LIGHT_DIR, ortho_camera
+
+    model = MODELS["lafortune"]
+    size, ss = 64, 8
+    scene = pr.Scene(ortho_camera(size * ss), [pr.Sphere(model)], [pr.DirectionalLight(LIGHT_DIR, irradiance=np.pi)])
+    ref = np.asarray(pr.render(scene, dtype=jnp.float64).image).reshape(size, ss, size, ss, 3).mean(axis=(1, 3))
+    name = ex.register_mitsuba_bsdf(model, "polyjax_psnr")
+    T = mi.ScalarTransform4f
+    mscene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "sensor": {"type": "orthographic",
+                   "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]) @ T().scale([1.05, 1.05, 1]),
+                   "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
+                            "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": 256}},
+        "sphere": {"type": "sphere", "bsdf": {"type": name}},
+        "light": {"type": "directional", "direction": [float(-x) for x in LIGHT_DIR],
+                  "irradiance": {"type": "rgb", "value": [float(np.pi)] * 3}},
+    })
+    img = np.asarray(mi.render(mscene), dtype=np.float64)
+    assert float(pj.psnr(img, ref)) >= 40.0
+    assert float(pj.psnr(img[:, ::-1], ref)) < 30.0
