@@ -1,4 +1,4 @@
-"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``, ``reproduce``."""
+"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``, ``export``, ``reproduce``."""
 
 from __future__ import annotations
 
@@ -147,6 +147,10 @@ def build_parser() -> argparse.ArgumentParser:
     else:
         rp = add_render_parser(sub, parents=[common])
         rp.set_defaults(func=run_render)
+
+    from .export._cli import add_export_parser, run_export
+
+    add_export_parser(sub, parents=[common]).set_defaults(func=run_export)
 
     rep = sub.add_parser("reproduce", parents=[common], help="reproduce the paper's Tables 1-4 and Figs. 3, 5-8 (see benchmarks/reproduce.py)")
     rep.add_argument("--quick", action="store_true")

@@ -260,3 +260,25 @@ def test_mitsuba_sphere_matches_polyjax_render():
     img = np.asarray(mi.render(mscene), dtype=np.float64)
     assert float(pj.psnr(img, ref)) >= 40.0
     assert float(pj.psnr(img[:, ::-1], ref)) < 30.0
+
+
+def test_cli_export_every_format(tmp_path, capsys):
+    from polyjax._cli import main
+
+    model = MODELS["ward"]
+    src = pj.save_model(tmp_path / "fit.npz", model)
+    for fmt, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf"), ("merl", ".binary"), ("mitsuba", ".py")):
+        assert main(["export", str(src), "--to", fmt]) == 0
+        out = src.with_suffix(suffix)
+        assert out.is_file() and f"wrote {out}" in capsys.readouterr().out
+    assert src.with_suffix(".glsl").read_text() == ex.glsl(model)
+    values, _ = pj.data.read_merl_binary(src.with_suffix(".binary"))
+    u, v, _, above = pj.data.merl_grid()
+    np.testing.assert_allclose(values[:, above], np.maximum(_rgb(model, u[above], v[above]), 0.0).T, rtol=1e-9)
+    ns = {}
+    exec(src.with_suffix(".py").read_text(), ns)
+    assert ns["MODEL"] == str(src.resolve()) and callable(ns["register"])
+    assert main(["export", str(src), "--to", "glsl", "--index", "0", "--out", str(tmp_path / "red.glsl")]) == 0
+    assert (tmp_path / "red.glsl").read_text() == ex.glsl(model[0])
+    assert main(["export", str(src), "--to", "glsl", "--index", "5"]) == 2
+    assert "--index" in capsys.readouterr().err
