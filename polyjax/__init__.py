@@ -29,8 +29,8 @@ __version__ = "0.1.0"
 __all__ = [
     "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
     "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "UnknownNameError", "VariableSet",
-    "approximation_error", "cartesian_to_spherical", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix", "export",
-    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
+    "approximation_error", "cartesian_to_spherical", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
+    "evaluate_paper_form", "explanatory_variables", "export", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
     "get_variables", "half_vector", "has_data_root", "l2_error", "load_model", "make_measurements", "n_parameters",
     "n_terms", "psnr", "reflect", "register_variables", "safe_normalize", "save_model", "spherical_to_cartesian",
     "variable_sets", "weighted_lstsq",

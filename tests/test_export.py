@@ -245,11 +245,12 @@ def test_mitsuba_sphere_matches_polyjax_render():
     ref = np.asarray(pr.render(scene, dtype=jnp.float64).image).reshape(size, ss, size, ss, 3).mean(axis=(1, 3))
     name = ex.register_mitsuba_bsdf(model, "polyjax_psnr")
     T = mi.ScalarTransform4f
+    to_world = T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]) @ T().scale([1.05, 1.05, 1])
     mscene = mi.load_dict({
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
         "sensor": {"type": "orthographic",
-                   "to_world": T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]) @ T().scale([1.05, 1.05, 1]),
+                   "to_world": to_world,
                    "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
                             "pixel_format": "rgb"},
                    "sampler": {"type": "independent", "sample_count": 256}},

@@ -512,4 +512,4 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
     return RenderResult(img, hit, effects, int(spp) if sampled else 0)
 
 
-__all__ = ["RenderResult", "SAMPLING_MODES", "cast_floats", "render"]
+__all__ = ["SAMPLING_MODES", "RenderResult", "cast_floats", "render"]
