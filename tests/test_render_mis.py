@@ -76,3 +76,17 @@ def test_unknown_sampling_raises():
     scene = pr.Scene(ortho_camera(4), [pr.Sphere(pr.Lambertian())], [pr.procedural_sky(8, 16)])
     with pytest.raises(pj.InputError, match="sampling"):
         pr.render(scene, sampling="bsdf")
+
+
+def test_brdf_sampled_indirect_bounces_agree_with_cosine_bounces():
+    """Sphere on a plane, point light: the indirect term with BRDF-sampled bounces has the cosine-sampled
+    bounces' expectation."""
+    scene = sphere_on_plane(pr.Phong(0.2, 0.6, 30.0), size=12, max_bounces=1)
+    a = pr.render(scene, spp=512, sampling="mis", dtype=jnp.float64)
+    b = pr.render(scene, spp=512, sampling="cosine", dtype=jnp.float64)
+    assert a.effects.indirect
+    direct = np.asarray(pr.render(sphere_on_plane(pr.Phong(0.2, 0.6, 30.0), size=12), dtype=jnp.float64).image)
+    ia, ib = np.asarray(a.image) - direct, np.asarray(b.image) - direct
+    assert np.all(np.isfinite(ia))
+    assert ib.mean() > 0.02 * direct.mean()  # the indirect term is not negligible
+    assert abs(ia.mean() - ib.mean()) < 0.05 * ib.mean(), (ia.mean(), ib.mean())
