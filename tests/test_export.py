@@ -198,13 +198,22 @@ def test_mitsuba_chi2_polynomial(view, tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("view", [NORMAL, OBLIQUE, GRAZING], ids=["normal", "oblique", "grazing"])
 def test_mitsuba_samples_exact_chi2_baseline(view):
+    _mitsuba_samples_exact_chi2(cook_torrance(), view)
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("view", [NORMAL, GRAZING], ids=["normal", "grazing"])
+def test_mitsuba_samples_exact_chi2_neural(view):
+    _mitsuba_samples_exact_chi2(neural(), view)
+
+
+def _mitsuba_samples_exact_chi2(brdf, view):
     """Samples drawn by the plugin in Mitsuba against polyjax's density, with the exact quadrature of
     ``_sampling_problems`` (Mitsuba's float32 trapezoid rule is too coarse for this sharp a piecewise-constant
     density: it rejects at p ~ 0.003 at normal view from integration error alone)."""
     mi = _mitsuba("llvm_ad_rgb")
     import drjit as dr
 
-    brdf = cook_torrance()
     bsdf = ex.mitsuba_bsdf(brdf, resolution=TABLE)
     s = pj.render.importance_sampler(brdf, resolution=TABLE)
     n = 400_000
@@ -220,7 +229,7 @@ def test_mitsuba_samples_exact_chi2_baseline(view):
     pdf_m = np.asarray(bs.pdf)
     pdf_p = np.asarray(s.pdf(jnp.asarray(u), jnp.asarray(view)))
     assert np.mean(np.abs(pdf_m - pdf_p) > 1e-4 * pdf_p) < 1e-4  # float32: a few samples on cell edges
-    weight = np.stack([np.asarray(weight[i]) for i in range(3)], -1)  # a baseline is tabulated on the MERL grid
+    weight = np.stack([np.asarray(weight[i]) for i in range(3)], -1)  # tabulated on the MERL grid
     assert np.all(np.isfinite(weight)) and np.all(weight >= 0) and np.mean(weight.max(axis=1) > 0) > 0.999
     assert chi2_pvalue(u @ back.T, lambda w: s.pdf(w, jnp.asarray(back @ view))) > 1e-3
 
