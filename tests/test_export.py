@@ -77,6 +77,36 @@ def test_numpy_print_matches_model(name):
     np.testing.assert_array_equal(got[:10], 0.0)
 
 
+@pytest.mark.data
+def test_numpy_print_matches_neural_model():
+    brdf = neural()
+    u, v = _directions()
+    u[10] = v[10] * np.array([-1.0, -1.0, 1.0])  # mirror pair: half vector at the pole
+    got = ex.numpy_function(brdf)(u, v)
+    want = _rgb(jax.tree.map(lambda a: jnp.asarray(a, jnp.float64) if eqx_inexact(a) else a, brdf), u, v)
+    scale = float(np.max(np.abs(want)))
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9 * scale)
+    np.testing.assert_array_equal(got[:10], 0.0)
+
+
+@pytest.mark.data
+@pytest.mark.skipif(GLSLANG is None, reason="glslangValidator (Debian glslang-tools) not installed")
+def test_glsl_of_neural_model_compiles(tmp_path):
+    path = ex.brdf_explorer(neural(), tmp_path / "neural.brdf")
+    src = ex.glsl(neural())
+    assert src.strip() in path.read_text()
+    frag = tmp_path / "neural.frag"
+    frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
+                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
+                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def eqx_inexact(a):
+    return hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
+
+
 def test_numpy_print_detects_a_changed_coefficient():
     model = MODELS["lafortune"]
     bumped = jax.tree.map(lambda a: a, model)
@@ -177,6 +207,24 @@ def test_mitsuba_eval_and_pdf_match_polyjax(variant):
         np.testing.assert_allclose(np.ravel(val), _rgb(model, a, b) * a[2], rtol=2e-5, atol=1e-6)
         want = float(sampler.pdf(jnp.asarray(a), jnp.asarray(b)))
         assert abs(float(np.ravel(pdf)[0]) - want) <= 1e-4 * want or variant == "llvm_ad_rgb"
+
+
+@pytest.mark.data
+def test_mitsuba_eval_of_neural_model_matches_polyjax():
+    mi = _mitsuba("llvm_ad_rgb")
+    import drjit as dr
+
+    brdf = neural()
+    bsdf = ex.mitsuba_bsdf(brdf, resolution=TABLE)
+    u, v = _directions(2000, seed=5)
+    u[:, 2] = np.abs(u[:, 2]) + 0.01
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(u))
+    si.wi = mi.Vector3f(*(mi.Float(c.astype(np.float32)) for c in v.T))
+    val = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(mi.Float(c.astype(np.float32)) for c in u.T)))
+    got = np.stack([np.asarray(val[i]) for i in range(3)], -1)
+    want = _rgb(brdf, u, v) * u[:, 2:3]
+    np.testing.assert_allclose(got, want, rtol=1e-3, atol=1e-4 * float(want.max()))  # float32 in Mitsuba
 
 
 def _mitsuba_chi2(mi, brdf, view, tmp_path, monkeypatch):

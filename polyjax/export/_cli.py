@@ -66,9 +66,9 @@ def run_export(args) -> int:
     elif args.to == "merl":
         merl_binary(model, out)
     else:
-        from ._expr import polynomial_program
+        from ._expr import program
 
-        polynomial_program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
+        program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
         out.write_text(_MITSUBA_SCRIPT.format(model=str(src.resolve()), index=args.index, name=args.name,
                                               stem=out.stem))
     print(f"wrote {out} ({args.to})")

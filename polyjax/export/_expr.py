@@ -7,7 +7,8 @@ nested tuples (:func:`add`, :func:`mul`, ...), so every dialect prints the same 
 the numpy print, evaluated in float64, is what the tests compare with the model; the GLSL print is compiled by
 ``glslangValidator``; the Dr.Jit print runs inside Mitsuba.
 
-:func:`polynomial_program` builds the program of a :class:`polyjax.PolynomialBRDF` (paper equation (3), or (2) with
+:func:`neural_program` builds that of a ``NeuralBRDF`` (its MLP written out). :func:`polynomial_program` builds
+the program of a :class:`polyjax.PolynomialBRDF` (paper equation (3), or (2) with
 interactions): normalise ``u`` and ``v``; the explanatory variables ``X`` of its variable set; per channel the
 principal components ``t_j = (sum_i (X_i - mean_i) R_ij - centre_j) / halfwidth_j`` (``t_j = 0`` for an infinite
 half-width); the basis ``B_e = prod_j P_{e_j}(t_j)`` (Legendre by the three-term recurrence, or monomials);
@@ -69,6 +70,11 @@ def where_positive(a, b, value):
     return ("where", a, b, value)
 
 
+def select_gt(a, b, x, y):
+    """``x`` where ``a > b``, else ``y``."""
+    return ("select", a, b, x, y)
+
+
 class Program:
     """A straight-line program: ``assign`` adds ``name = expression`` and returns ``var(name)``."""
 
@@ -117,6 +123,12 @@ class Program:
             if d == "numpy":
                 return f"np.where(({a} > 0) & ({b} > 0), {value}, 0.0)"
             return f"dr.select(({a} > 0) & ({b} > 0), {value}, 0.0)"
+        if kind == "select":
+            a, b, x, y = (self._print(z, d) for z in e[1:])
+            if d == "glsl":
+                return f"(({a} > {b}) ? ({x}) : ({y}))"
+            fn = "np.where" if d == "numpy" else "dr.select"
+            return f"{fn}({a} > {b}, {x}, {y})"
         raise ValueError(f"unknown expression kind {kind!r}")
 
     def glsl_body(self, indent: str = "    ") -> str:
@@ -206,6 +218,56 @@ def _channel(prog: Program, model: PolynomialBRDF, lane: int, x):
     return prog.assign(add(*terms) if terms else const(0.0), prefix="f")
 
 
+def neural_program(model) -> Program:
+    """The :class:`Program` of a ``polyjax.data.NeuralBRDF`` (Sztrajman et al. 2021): network inputs
+    ``(h, d)`` from the normalised directions (``phi_h`` rotated to 0; at the pole ``theta_h = 0``), two ReLU
+    layers, ``exp(z) - 1``, negative outputs clamped to 0, 0 unless both directions are above the horizon."""
+    prog = Program()
+    ux, uy, uz = _unit(prog, INPUTS[:3])
+    vx, vy, vz = _unit(prog, INPUTS[3:])
+    sx, sy, sz = (prog.assign(add(a, b)) for a, b in ((ux, vx), (uy, vy), (uz, vz)))
+    inv = prog.assign(div(const(1.0), call("sqrt", add(mul(sx, sx), mul(sy, sy), mul(sz, sz)))))
+    hx, hy, hz = (prog.assign(mul(c, inv)) for c in (sx, sy, sz))
+    r2 = prog.assign(add(mul(hx, hx), mul(hy, hy)))
+    tiny = const(1e-30)
+    sin_t = prog.assign(select_gt(r2, tiny, call("sqrt", r2), const(0.0)))
+    safe = prog.assign(select_gt(r2, tiny, sin_t, const(1.0)))
+    cos_p = prog.assign(select_gt(r2, tiny, div(hx, safe), const(1.0)))
+    sin_p = prog.assign(select_gt(r2, tiny, div(hy, safe), const(0.0)))
+    x = prog.assign(add(mul(cos_p, ux), mul(sin_p, uy)))
+    y = prog.assign(sub(mul(cos_p, uy), mul(sin_p, ux)))
+    dx = prog.assign(sub(mul(x, hz), mul(uz, sin_t)))
+    dz = prog.assign(add(mul(x, sin_t), mul(uz, hz)))
+    inputs = [sin_t, None, hz, dx, y, dz]  # h_y = 0
+    w1, b1, w2, b2, w3, b3 = (np.asarray(a, np.float64) for a in model.params)
+
+    def dense(xs, w, b, relu):
+        out = []
+        for k in range(w.shape[1]):
+            z = add(*[mul(xi, const(w[i, k])) for i, xi in enumerate(xs) if xi is not None], const(b[k]))
+            out.append(prog.assign(call("max", z, const(0.0)) if relu else z))
+        return out
+
+    a1 = dense(inputs, w1, b1, True)
+    a2 = dense(a1, w2, b2, True)
+    z3 = dense(a2, w3, b3, False)
+    outs = [prog.assign(call("max", sub(call("exp", z), const(1.0)), const(0.0)), prefix="f") for z in z3]
+    prog.output([where_positive(var("uz"), var("vz"), f) for f in outs])
+    return prog
+
+
+def program(model) -> Program:
+    """The :class:`Program` of a :class:`polyjax.PolynomialBRDF` or a ``polyjax.data.NeuralBRDF``."""
+    from ..data._nbrdf import NeuralBRDF
+
+    if isinstance(model, NeuralBRDF):
+        return neural_program(model)
+    if isinstance(model, PolynomialBRDF):
+        return polynomial_program(model)
+    raise InputError(f"model: expected a polyjax.PolynomialBRDF or polyjax.data.NeuralBRDF, found "
+                     f"{type(model).__name__} (other BRDFs: use merl_binary, or the Mitsuba plugin's tabulation)")
+
+
 def polynomial_program(model: PolynomialBRDF) -> Program:
     """The :class:`Program` of a polynomial model of batch shape ``()``, ``(1,)`` (grey) or ``(3,)`` (RGB)."""
     if not isinstance(model, PolynomialBRDF):
@@ -225,4 +287,4 @@ def polynomial_program(model: PolynomialBRDF) -> Program:
     return prog
 
 
-__all__ = ["INPUTS", "OUTPUTS", "Program", "polynomial_program"]
+__all__ = ["INPUTS", "OUTPUTS", "Program", "neural_program", "polynomial_program", "program"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._expr import polynomial_program
+from ._expr import program
 
 _HEADER = "// polyjax {what}: variables={variables}, basis={basis}, degree={degree}, interactions={interactions}"
 
@@ -23,16 +23,20 @@ def glsl(model, name: str = "BRDF") -> str:
     """GLSL source of ``vec3 name(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` evaluating ``model``.
 
     Args:
-        model: a :class:`polyjax.PolynomialBRDF` of batch shape ``()``, ``(1,)`` or ``(3,)``.
+        model: a :class:`polyjax.PolynomialBRDF` of batch shape ``()``, ``(1,)`` or ``(3,)``, or a
+            ``polyjax.data.NeuralBRDF`` (its network written out).
         name: the function's name (BRDF Explorer calls ``BRDF``).
 
     Returns:
         The source (GLSL 1.20 and later: scalar ``float`` arithmetic, ``sqrt``, ``max``).
     """
-    prog = polynomial_program(model)
-    header = _HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
-                            degree=[int(d) for d in np.asarray(model.degree).ravel()],
-                            interactions=model.interactions)
+    prog = program(model)
+    if hasattr(model, "variables"):
+        header = _HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
+                                degree=[int(d) for d in np.asarray(model.degree).ravel()],
+                                interactions=model.interactions)
+    else:
+        header = f"// polyjax neural BRDF {getattr(model, 'name', '')} (Sztrajman et al. 2021)"
     return (
         f"{header}\n"
         f"vec3 {name}(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)\n{{\n"
@@ -61,7 +65,7 @@ def numpy_function(model):
     """``f(u, v) -> (..., 3)`` in numpy, from the same program as :func:`glsl` (for checking exports)."""
     import numpy as np
 
-    fn = polynomial_program(model).python_function("numpy")
+    fn = program(model).python_function("numpy")
 
     def f(u, v):
         u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))

@@ -6,9 +6,9 @@ instance; ``mi.load_dict({"type": "polyjax"})`` then builds it inside scenes. Co
 ``si.wi`` (towards the viewer) is polyjax's view ``v``, ``wo`` the light ``u``; ``eval`` returns
 ``f(u, v) cos theta_u`` (RGB), 0 unless both are above the surface (one-sided, glossy reflection).
 
-- **Evaluation**: a polynomial model is the Dr.Jit print of the one program of :mod:`polyjax.export._expr`
-  (the same arithmetic as the GLSL and numpy exports), so Mitsuba evaluates the fit itself; any other model
-  (baselines, ``NeuralBRDF``, ``TabulatedBRDF``) is tabulated on the MERL grid (:func:`tabulate_merl`, 90 x 90
+- **Evaluation**: a polynomial model or a ``NeuralBRDF`` is the Dr.Jit print of the one program of
+  :mod:`polyjax.export._expr` (the same arithmetic as the GLSL and numpy exports), so Mitsuba evaluates the model
+  itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated on the MERL grid (:func:`tabulate_merl`, 90 x 90
   x 180 Rusinkiewicz bins) and looked up at the nearest bin centre, an approximation at MERL's resolution.
 - **Sampling**: the tables of :class:`polyjax.render.ImportanceSampler` (same map, mixture and density as
   polyjax's own sampler, :mod:`polyjax.render._sampling`), so ``pdf`` is exactly the density ``sample`` draws
@@ -27,7 +27,7 @@ from .._errors import InputError
 from .._model import PolynomialBRDF
 from ..render._brdf import rgb_brdf
 from ..render._sampling import ImportanceSampler, importance_sampler
-from ._expr import polynomial_program
+from ._expr import program
 
 
 def _mitsuba():
@@ -210,8 +210,10 @@ def register_mitsuba_bsdf(model, name: str = "polyjax", **sampler_options) -> st
             ``alpha``, ...).
     """
     mi, dr = _mitsuba()
-    if isinstance(model, PolynomialBRDF):
-        evaluate = polynomial_program(model).python_function("drjit")
+    from ..data._nbrdf import NeuralBRDF
+
+    if isinstance(model, (PolynomialBRDF, NeuralBRDF)):
+        evaluate = program(model).python_function("drjit")
     else:
         evaluate = _tabulated_eval(mi, dr, rgb_brdf(model))
     sampler = importance_sampler(model, **sampler_options)
