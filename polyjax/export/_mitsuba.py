@@ -8,8 +8,9 @@ instance; ``mi.load_dict({"type": "polyjax"})`` then builds it inside scenes. Co
 
 - **Evaluation**: a polynomial model or a ``NeuralBRDF`` is the Dr.Jit print of the one program of
   :mod:`polyjax.export._expr` (the same arithmetic as the GLSL and numpy exports), so Mitsuba evaluates the model
-  itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated on the MERL grid (:func:`tabulate_merl`, 90 x 90
-  x 180 Rusinkiewicz bins) and looked up at the nearest bin centre, an approximation at MERL's resolution.
+  itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated on the MERL grid
+  (:func:`tabulate_merl`, 90 x 90 x 180 Rusinkiewicz bins) and looked up at the nearest bin centre, an
+  approximation at MERL's resolution.
 - **Sampling**: the tables of :class:`polyjax.render.ImportanceSampler` (same map, mixture and density as
   polyjax's own sampler, :mod:`polyjax.render._sampling`), so ``pdf`` is exactly the density ``sample`` draws
   from: ``sample1`` chooses the cosine component (probability ``alpha``), then is rescaled to choose the view
