@@ -1,4 +1,4 @@
-"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``, ``export``, ``reproduce``."""
+"""The ``polyjax`` command line: ``report`` (the default), ``fit``, ``render``, ``reproduce``."""
 
 from __future__ import annotations
 

@@ -3,7 +3,8 @@
 Any BRDF renders through one protocol, a callable ``f(u, v) -> (..., 3)`` (light ``u``, view
 ``v``, local frame with normal ``+z``): fitted :class:`polyjax.PolynomialBRDF` s (via
 :func:`rgb_brdf`), measured samples (:class:`TabulatedBRDF`), analytic BRDFs
-(:class:`Lambertian`, :class:`Phong`) and ``polyjax.data.NeuralBRDF``.
+(:class:`Lambertian`, :class:`Phong`) and ``polyjax.data.NeuralBRDF``. Every one of them can be
+importance-sampled (:func:`importance_sampler`).
 
 Typical use::
 
@@ -21,9 +22,9 @@ from ._sampling import ImportanceSampler, importance_sampler
 from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
-    "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult",
-    "ImportanceSampler", "Lambertian", "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV",
-    "TabulatedBRDF", "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb", "importance_sampler",
-    "load_envmap", "mosaic", "plan_effects", "procedural_sky", "read_exr", "sample_pool", "render", "render_grid",
-    "rgb_brdf", "sphere_scene", "to_srgb", "write_exr", "write_png",
+    "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult", "Lambertian",
+    "Phong", "Plane", "PointLight", "RenderResult", "Scene", "Sphere", "SwapUV", "TabulatedBRDF", "cast_floats",
+    "comparison_figure", "difference_images", "evaluate_rgb", "load_envmap", "mosaic", "plan_effects",
+    "procedural_sky", "read_exr", "sample_pool", "render", "render_grid", "rgb_brdf", "sphere_scene", "to_srgb", "write_exr",
+    "write_png", "ImportanceSampler", "importance_sampler",
 ]
