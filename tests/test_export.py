@@ -340,3 +340,17 @@ def test_cli_export_every_format(tmp_path, capsys):
     assert (tmp_path / "red.glsl").read_text() == ex.glsl(model[0])
     assert main(["export", str(src), "--to", "glsl", "--index", "5"]) == 2
     assert "--index" in capsys.readouterr().err
+
+
+def test_tabulate_merl_is_differentiable():
+    model = MODELS["lafortune"]
+
+    def total(coef):
+        m = pj.PolynomialBRDF(**{**{k: getattr(model, k) for k in model.__dataclass_fields__}, "coefficients": coef})
+        vals, _ = ex.tabulate_merl(m, resolution=(9, 9, 18))
+        return jnp.sum(vals)
+
+    g = jax.grad(total)(model.coefficients)
+    d = jnp.zeros_like(model.coefficients).at[2, 1].set(1e-4)
+    fd = (total(model.coefficients + d) - total(model.coefficients - d)) / 2e-4
+    np.testing.assert_allclose(float(g[2, 1]), float(fd), rtol=1e-7)
