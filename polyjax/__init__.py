@@ -7,7 +7,7 @@ least squares. Enable float64 in your entry point (``jax.config.update("jax_enab
 for fitting; polyjax does not change global JAX settings on import.
 """
 
-from . import data, render
+from . import data, export, render
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._config import DATA_ENV, data_root, has_data_root
@@ -42,7 +42,7 @@ __all__ = [
     "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs",
     "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error", "cartesian_to_spherical",
     "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial",
+    "evaluate_paper_form", "explanatory_variables", "export", "exponents", "fit_pca", "fit_polynomial",
     "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
     "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",

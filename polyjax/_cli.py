@@ -251,6 +251,10 @@ def build_parser() -> argparse.ArgumentParser:
         from .render._fit_cli import add_fit_images_parser
 
         add_fit_images_parser(sub, parents=[common])
+
+    from .export._cli import add_export_parser, run_export
+
+    add_export_parser(sub, parents=[common]).set_defaults(func=run_export)
     return p
 
 

@@ -8,7 +8,8 @@ Any BRDF renders through one protocol, a callable ``f(u, v) -> (..., 3)`` (light
 Scenes can be built inside ``jit``/``grad``; renders differentiate with respect to BRDF parameters,
 lights and environment texels (:mod:`polyjax.render._integrator`). :func:`light_samples` writes a
 render as a linear function of one object's BRDF (behind ``polyjax.fit_polynomial_to_images``);
-:func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``).
+:func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``). Every BRDF can be importance-sampled
+(:func:`importance_sampler`).
 
 Typical use::
 
@@ -24,6 +25,7 @@ from ._image import comparison_figure, difference_images, mosaic, read_exr, to_s
 from ._integrator import RenderResult, cast_floats, render
 from ._linear import LightSamples, light_samples, render_linear
 from ._mitsuba import RoughPlastic, mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba
+from ._sampling import ImportanceSampler, importance_sampler
 from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
@@ -32,5 +34,5 @@ __all__ = [
     "SwapUV", "TabulatedBRDF", "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb",
     "light_samples", "load_envmap", "mitsuba_bsdf_eval", "mitsuba_roughplastic", "mitsuba_scene_dict", "mosaic",
     "plan_effects", "pool_indices", "procedural_sky", "read_exr", "render", "render_grid", "render_linear",
-    "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
+    "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png", "ImportanceSampler", "importance_sampler",
 ]

@@ -357,12 +357,185 @@ def _radiance_pool(env, n, seed, dtype, tables=None):
     return jnp.asarray(d, dtype), (radiance * jnp.asarray(inv_pdf, dtype)[:, None]).astype(dtype)
 
 
+# --------------------------------------------------------------------------- BRDF importance sampling (MIS)
+
+#: the ``sampling=`` modes of :func:`render` for the environment term
+SAMPLING_MODES = ("environment", "mis", "brdf", "cosine")
+
+
+def _env_pdf(env: EnvironmentLight, d):
+    """Solid-angle density of :meth:`EnvironmentLight.sample` at world directions ``d``:
+    ``p_ij H W / (2 pi^2 sin theta)`` for the pixel ``(i, j)`` holding ``d``."""
+    h, w = env.shape
+    theta = jnp.arccos(jnp.clip(d[..., 1], -1.0, 1.0))
+    phi = jnp.arctan2(d[..., 0], -d[..., 2])
+    i = jnp.clip(jnp.floor(theta / jnp.pi * h).astype(jnp.int32), 0, h - 1)
+    j = jnp.clip(jnp.floor((phi + jnp.pi) / (2 * jnp.pi) * w).astype(jnp.int32), 0, w - 1)
+    st = jnp.maximum(jnp.sin(theta), 1e-12)
+    return env.pmf.astype(d.dtype)[i * w + j] * (h * w) / (2 * jnp.pi**2 * st)
+
+
+def _from_local(frame, loc):
+    t_, b_, n_ = frame
+    return loc[..., :1] * t_ + loc[..., 1:2] * b_ + loc[..., 2:] * n_
+
+
+def _sampled_direction(samplers, idx, xi, vl):
+    """Local light directions and their densities from the sampler of the object hit (``None``: cosine)."""
+    from ._sampling import cosine_pdf, cosine_sample
+
+    if samplers is None:
+        u = cosine_sample(xi[..., 3:5])
+        return u, cosine_pdf(u)
+    us = [s.warp(xi, vl)[0] for s in samplers]
+    u = _select(idx, us)
+    pdf = _select(idx, [s.pdf(u, vl)[..., None] for s in samplers])[..., 0]
+    return u, pdf
+
+
+def _env_mis_sum(objects, env, p, frame, vl, idx, pool, samplers, salt, pix, n_env, n_brdf, shadow_objects):
+    r"""Environment lighting by multiple importance sampling (balance heuristic, Veach 1997) of ``n_env``
+    pooled environment samples and ``n_brdf`` BRDF samples per point:
+
+    .. math::
+        \hat L = \sum_{k} \frac{f(u_k, v)\, L_{env}(u_k) \cos^+\theta_k\, V(u_k)}
+                          {n_{env}\, p_{env}(u_k) + n_{brdf}\, p_{brdf}(u_k \mid v)}
+
+    over all ``n_env + n_brdf`` samples ``u_k`` (each drawn from one of the two densities). Unbiased when
+    ``p_env`` or ``p_brdf`` is positive wherever the integrand is; the BRDF density
+    (:class:`polyjax.render.ImportanceSampler`, or cosine when ``samplers`` is None) is positive on the whole
+    upper hemisphere. ``n_env = 0`` is pure BRDF (or cosine) sampling. Returns the estimate ``(N, 3)`` (the
+    ``1 / n`` normalisation is in the denominator).
+    """
+    n = frame[2]
+    dirs, _ = pool
+    n_pool = dirs.shape[0]
+    inf = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
+    brdf = _object_brdf(objects, idx)
+    offset = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
+    stride = jnp.uint32(_pool_stride(n_pool))
+
+    def contribution(l, cos, denom_env, denom_brdf):
+        ul = _to_local(frame, l)
+        c = brdf(ul, vl) * env.radiance(l) * (cos / (denom_env + denom_brdf))[..., None]
+        if shadow_objects is not None:
+            c = c * _visible(shadow_objects, p, n, l, inf)[..., None]
+        return c
+
+    def env_one(s, a):
+        k = ((offset + jnp.uint32(s) * stride) & jnp.uint32(n_pool - 1)).astype(jnp.int32)
+        l = dirs[k]
+        cos = jnp.maximum(_dot(n, l), 0.0)
+        ul = _to_local(frame, l)
+        if samplers is None:
+            pb = jnp.maximum(ul[..., 2], 0.0) / jnp.pi
+        else:
+            pb = _select(idx, [s.pdf(ul, vl)[..., None] for s in samplers])[..., 0]
+        c = contribution(l, cos, n_env * _env_pdf(env, l), n_brdf * pb)
+        return a + jnp.where((cos > 0)[..., None], c, 0.0)
+
+    def brdf_one(s, a):
+        h = _hash(offset + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32(0x5BD1E995))
+        hs = [h]
+        for _ in range(4):
+            hs.append(_hash(hs[-1]))
+        xi = jnp.stack([_unit(x, p.dtype) for x in hs], -1)
+        ul, pb = _sampled_direction(samplers, idx, xi, vl)
+        l = _from_local(frame, ul)
+        cos = jnp.maximum(ul[..., 2], 0.0)
+        c = contribution(l, cos, n_env * _env_pdf(env, l), n_brdf * pb)
+        return a + jnp.where(((pb > 0) & (cos > 0))[..., None], c, 0.0)
+
+    acc = jnp.zeros(p.shape, p.dtype)
+    if n_env > 0:
+        acc = jax.lax.fori_loop(0, n_env, env_one, acc)
+    if n_brdf > 0:
+        acc = jax.lax.fori_loop(0, n_brdf, brdf_one, acc)
+    return acc
+
+
+@eqx.filter_jit
+def _stage_env_mis(scene: Scene, g, pool, samplers, seed, n_env: int, n_brdf: int, shadows: bool):
+    pix = jnp.arange(g["p"].shape[0], dtype=jnp.uint32)
+    env = scene.environment if scene.environment is not None else _black_env(g["p"].dtype)
+    return _env_mis_sum(scene.objects, env, g["p"], g["frame"], g["vl"], g["idx"], pool, samplers,
+                        seed ^ jnp.uint32(_ENV_KEY), pix, n_env, n_brdf, scene.objects if shadows else None)
+
+
+def _env_sampled(scene: Scene, g, pool, seed, spp: int, sampling: str, shadows: bool, dtype):
+    """The environment term with BRDF sampling: ``"mis"`` splits ``spp`` into ``spp // 2`` environment and
+    ``spp - spp // 2`` BRDF samples, ``"brdf"`` and ``"cosine"`` draw all ``spp`` from the BRDF's importance
+    sampler or cosine-weighted (see :func:`_env_mis_sum`)."""
+    from ._sampling import importance_sampler
+
+    samplers = None
+    if sampling in ("mis", "brdf"):
+        samplers = tuple(importance_sampler(obj.brdf, dtype=dtype) for obj in scene.objects)
+    n_env = spp // 2 if sampling == "mis" else 0
+    return _stage_env_mis(scene, g, pool, samplers, seed, n_env, spp - n_env, shadows)
+
+
+def _indirect_sampled(objects, p, frame, vl, idx, pix, point_lights, pool, samplers, salt, spp, bounces,
+                      effects):
+    """:func:`_indirect` with each bounce direction drawn from the importance sampler of the object it leaves
+    (throughput ``*= f cos / pdf``) instead of cosine-weighted; the same estimate in expectation."""
+    eps = _eps(p.dtype)
+    shadow_objects = objects if effects.shadows else None
+    base = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
+
+    def path(s, acc):
+        pos, fr, v_loc, ix = p, frame, vl, idx
+        throughput = jnp.ones(p.shape, p.dtype)
+        alive = jnp.ones(p.shape[:-1], bool)
+        for bounce in range(bounces):
+            h = _hash(base + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32((bounce * 0x632BE5AB) & 0xFFFFFFFF))
+            hs = [h]
+            for _ in range(4):
+                hs.append(_hash(hs[-1]))
+            xi = jnp.stack([_unit(x, p.dtype) for x in hs], -1)
+            loc, pdf = _sampled_direction(samplers, ix, xi, v_loc)
+            ok = (pdf > 0) & (loc[..., 2] > 0)
+            d = _from_local(fr, loc)
+            weight = jnp.where(ok, loc[..., 2] / jnp.where(ok, pdf, 1.0), 0.0)
+            throughput = throughput * _object_brdf(objects, ix)(loc, v_loc) * weight[..., None]
+            n_ = fr[2]
+            t2, ix2, hit2 = _intersect(objects, pos + eps * n_, d, eps)
+            alive = alive & hit2 & ok
+            p2 = pos + jnp.where(hit2, t2, 0.0)[..., None] * d
+            fr2 = _frame(objects, p2, ix2)
+            v2 = _to_local(fr2, -d)
+            l2 = _direct(_object_brdf(objects, ix2), p2, fr2, v2, point_lights, pool, _hash(h ^ jnp.uint32(7)), pix,
+                         1, shadow_objects)
+            acc = acc + jnp.where(alive[..., None], throughput * l2, 0.0)
+            pos, fr, v_loc, ix = p2, fr2, v2, ix2
+        return acc
+
+    total = jax.lax.fori_loop(0, spp, path, jnp.zeros(p.shape, p.dtype))
+    return total / spp
+
+
+@eqx.filter_jit
+def _stage_indirect_sampled(scene: Scene, g, pool, samplers, seed, spp: int, bounces: int, effects: Effects):
+    pix = jnp.arange(g["p"].shape[0], dtype=jnp.uint32)
+    point_lights = scene.point_lights if effects.direct_point else ()
+    return _indirect_sampled(scene.objects, g["p"], g["frame"], g["vl"], g["idx"], pix, point_lights, pool, samplers,
+                             seed ^ jnp.uint32(_INDIRECT_KEY), spp, bounces, effects)
+
+
+def _indirect_with_sampler(scene: Scene, g, pool, seed, spp: int, bounces: int, effects: Effects, dtype):
+    """Indirect light with BRDF-sampled bounces (``sampling="mis"`` or ``"brdf"``)."""
+    from ._sampling import importance_sampler
+
+    samplers = tuple(importance_sampler(obj.brdf, dtype=dtype) for obj in scene.objects)
+    return _stage_indirect_sampled(scene, g, pool, samplers, seed, spp, bounces, effects)
+
+
 def _black_env(dtype):
     return cast_floats(EnvironmentLight(np.zeros((8, 16, 3))), dtype)
 
 
 def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: bool = False,
-           dtype=jnp.float32) -> RenderResult:
+           dtype=jnp.float32, sampling: str = "environment") -> RenderResult:
     """Render a scene, computing only the effects :func:`plan_effects` finds in it.
 
     Args:
@@ -371,6 +544,10 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
         seed: random seed of the sampled effects (each effect draws from its own stream).
         force_all_effects: compute every effect whatever the scene (for comparisons; see the module notes).
         dtype: floating-point type of the computation (the scene and its BRDFs are cast to it).
+        sampling: directions of the environment term: ``"environment"`` (importance-sampled from the map),
+            ``"mis"`` (half from the map, half from the BRDF's :class:`polyjax.render.ImportanceSampler`,
+            balance heuristic), ``"brdf"`` or ``"cosine"`` (all from the BRDF sampler / cosine-weighted). With
+            ``"mis"`` and ``"brdf"`` the indirect bounces are drawn from the BRDF sampler too.
 
     Returns:
         A :class:`RenderResult` with the image and the effects computed.
@@ -379,6 +556,8 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
         raise InputError(f"scene: expected a polyjax.render.Scene, found {type(scene).__name__}")
     if int(spp) < 1:
         raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
+    if sampling not in SAMPLING_MODES:
+        raise InputError(f"sampling: expected one of {SAMPLING_MODES}, found {sampling!r}")
     effects = Effects.all() if force_all_effects else plan_effects(scene)
     tables = scene.environment
     scene = cast_floats(scene, dtype)
@@ -394,16 +573,20 @@ def render(scene: Scene, *, spp: int = 64, seed: int = 0, force_all_effects: boo
         rad = _stage_point(scene, g, effects.shadows)
     else:
         rad = jnp.zeros_like(g["p"])
-    if effects.environment:
+    if effects.environment and sampling != "environment":
+        rad = rad + _env_sampled(scene, g, pool, seed_arr, int(spp), sampling, effects.shadows, dtype)
+    elif effects.environment:
         # the unshadowed environment term is one program whatever else is on; shadowed samples are
         # then removed by a separate estimate of the occluded part (the same samples, times 1 - V)
         rad = rad + _stage_env(scene, g, pool, seed_arr, int(spp), False)
         if effects.shadows:
             rad = rad - _stage_env(scene, g, pool, seed_arr, int(spp), True)
-    if effects.indirect:
+    if effects.indirect and sampling in ("mis", "brdf"):
+        rad = rad + _indirect_with_sampler(scene, g, pool, seed_arr, int(spp), bounces, effects, dtype)
+    elif effects.indirect:
         rad = rad + _stage_indirect(scene, g, pool, seed_arr, int(spp), bounces, effects)
     img, hit = _stage_finish(g, rad, scene.camera.width, scene.camera.height)
     return RenderResult(img, hit, effects, int(spp) if sampled else 0)
 
 
-__all__ = ["RenderResult", "cast_floats", "render"]
+__all__ = ["SAMPLING_MODES", "RenderResult", "cast_floats", "render"]

@@ -1,0 +1,78 @@
+"""``polyjax export MODEL --to mitsuba|brdf-explorer|glsl|merl --out PATH``: a saved model in another renderer."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
+
+_MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of the polyjax model {model!r} (written by `polyjax export --to mitsuba`).
+
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_rgb")        # or "scalar_rgb"
+    import {stem}
+    {stem}.register()                    # then {{"type": "{name}"}} in mi.load_dict / scene files
+"""
+
+MODEL = {model!r}
+INDEX = {index!r}
+
+
+def register(name={name!r}):
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import polyjax as pj
+
+    model = pj.load_model(MODEL)
+    if INDEX is not None:
+        model = model[INDEX]
+    return pj.export.register_mitsuba_bsdf(model, name)
+'''
+
+
+def add_export_parser(sub, parents=()) -> argparse.ArgumentParser:
+    p = sub.add_parser("export", parents=list(parents),
+                       help="write a saved model for Mitsuba 3, BRDF Explorer, GLSL or MERL tools")
+    p.add_argument("model", help="a model written by `polyjax fit --save` (.npz or .json)")
+    p.add_argument("--to", required=True, choices=sorted(FORMATS), help="target format")
+    p.add_argument("--out", default=None, help="output file (default: the model's name with the format's suffix)")
+    p.add_argument("--index", type=int, default=None,
+                   help="lane of a batched model (e.g. the material) when it holds more than one BRDF")
+    p.add_argument("--name", default="polyjax", help="Mitsuba plugin name (--to mitsuba)")
+    return p
+
+
+def run_export(args) -> int:
+    import polyjax as pj
+
+    from ._glsl import brdf_explorer, glsl
+    from ._merl import merl_binary
+
+    src = Path(args.model)
+    model = pj.load_model(src)
+    if args.index is not None:
+        bs = model.batch_shape
+        if not bs or not -bs[0] <= args.index < bs[0]:
+            raise pj.InputError(f"--index: expected a lane in [0, {bs[0] if bs else 0}) of the model's batch "
+                                f"shape {bs}, found {args.index}")
+        model = model[args.index]
+    out = Path(args.out) if args.out else src.with_suffix(FORMATS[args.to])
+    if args.to == "glsl":
+        out.write_text(glsl(model))
+    elif args.to == "brdf-explorer":
+        brdf_explorer(model, out)
+    elif args.to == "merl":
+        merl_binary(model, out)
+    else:
+        from ._expr import program
+
+        program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
+        out.write_text(_MITSUBA_SCRIPT.format(model=str(src.resolve()), index=args.index, name=args.name,
+                                              stem=out.stem))
+    print(f"wrote {out} ({args.to})")
+    return 0
+
+
+__all__ = ["add_export_parser", "run_export"]

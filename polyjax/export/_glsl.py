@@ -1,0 +1,79 @@
+"""GLSL export: ``vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` and Disney BRDF Explorer ``.brdf`` files.
+
+The function takes world-space light ``L`` and view ``V`` directions and the shading frame (normal ``N``,
+tangent ``X``, bitangent ``Y``), forms the local directions ``u = (L.X, L.Y, L.N)`` and ``v = (V.X, V.Y, V.N)``
+and evaluates the model there (the program of :mod:`polyjax.export._expr`, the same arithmetic as the numpy
+version the tests compare with the model). It returns linear RGB BRDF values in 1/sr (the polynomial is not
+clamped: it can be negative where the fit is). Not differentiable (text output).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ._expr import program
+
+_HEADER = "// polyjax {what}: variables={variables}, basis={basis}, degree={degree}, interactions={interactions}"
+
+
+def glsl(model, name: str = "BRDF") -> str:
+    """GLSL source of ``vec3 name(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` evaluating ``model``.
+
+    Args:
+        model: a :class:`polyjax.PolynomialBRDF` of batch shape ``()``, ``(1,)`` or ``(3,)``, or a
+            ``polyjax.data.NeuralBRDF`` (its network written out).
+        name: the function's name (BRDF Explorer calls ``BRDF``).
+
+    Returns:
+        The source (GLSL 1.20 and later: scalar ``float`` arithmetic, ``sqrt``, ``max``).
+    """
+    prog = program(model)
+    if hasattr(model, "variables"):
+        header = _HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
+                                degree=[int(d) for d in np.asarray(model.degree).ravel()],
+                                interactions=model.interactions)
+    else:
+        header = f"// polyjax neural BRDF {getattr(model, 'name', '')} (Sztrajman et al. 2021)"
+    return (
+        f"{header}\n"
+        f"vec3 {name}(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)\n{{\n"
+        "    float ux = dot(L, X); float uy = dot(L, Y); float uz = dot(L, N);\n"
+        "    float vx = dot(V, X); float vy = dot(V, Y); float vz = dot(V, N);\n"
+        f"{prog.glsl_body()}\n"
+        "    return vec3(out_r, out_g, out_b);\n}\n"
+    )
+
+
+def brdf_explorer(model, path: str | os.PathLike) -> Path:
+    """Write a Disney BRDF Explorer ``.brdf`` file (its ``analytic`` format) for ``model``.
+
+    The file holds an empty parameter block and the GLSL of :func:`glsl` between ``::begin shader`` and
+    ``::end shader``. Returns the path written.
+    """
+    src = glsl(model)
+    text = ("analytic\n\n# exported by polyjax\n\n::begin parameters\n::end parameters\n\n"
+            f"::begin shader\n\n{src}\n::end shader\n")
+    path = Path(path)
+    path.write_text(text)
+    return path
+
+
+def numpy_function(model):
+    """``f(u, v) -> (..., 3)`` in numpy, from the same program as :func:`glsl` (for checking exports)."""
+    import numpy as np
+
+    fn = program(model).python_function("numpy")
+
+    def f(u, v):
+        u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = fn(*np.moveaxis(u, -1, 0), *np.moveaxis(v, -1, 0))
+        return np.stack([np.broadcast_to(o, u.shape[:-1]) for o in out], axis=-1)
+
+    return f
+
+
+__all__ = ["brdf_explorer", "glsl", "numpy_function"]

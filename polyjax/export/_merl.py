@@ -1,0 +1,69 @@
+"""MERL export: tabulate any BRDF on the 90 x 90 x 180 MERL grid and write the ``.binary`` layout.
+
+The layout and the grid are those of :mod:`polyjax.data._merl` (header ``(90, 90, 180)``, channel-major float64,
+``idx = phi_d + 180 (theta_d + 90 theta_h)``, values divided by MERL's per-channel scale). Each bin gets the
+BRDF at its bin centre (the direction :func:`polyjax.data.load_merl_binary` attaches to it), so writing and
+reading back returns the model's values there. Bins with either direction at or below the horizon are
+written as -1 (MERL's "missing"), and negative BRDF values (a polynomial fit can dip below 0) are clamped to 0
+(a negative number would read as missing).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..data._merl import MERL_RESOLUTION, merl_grid, write_merl_binary
+from ..render._brdf import evaluate_rgb, rgb_brdf
+
+_CHUNK = 1 << 16
+
+
+@eqx.filter_jit
+def _evaluate(brdf, u, v):
+    n = u.shape[0]
+    m = -(-n // _CHUNK) * _CHUNK
+    pad = lambda a: jnp.concatenate([a, jnp.tile(jnp.asarray([[0.0, 0.0, 1.0]], a.dtype), (m - n, 1))])
+    uc, vc = pad(u).reshape(-1, _CHUNK, 3), pad(v).reshape(-1, _CHUNK, 3)
+    out = jax.lax.map(lambda uv: evaluate_rgb(brdf, uv[0], uv[1]), (uc, vc))
+    return out.reshape(m, 3)[:n]
+
+
+def tabulate_merl(brdf, resolution=MERL_RESOLUTION, dtype=jnp.float64) -> tuple[Float[Array, "3 n"], np.ndarray]:
+    """``(values (3, N), valid (N,))``: ``brdf`` (any model :func:`polyjax.render.rgb_brdf` accepts) at the bin
+    centres of the MERL grid in file order, and where both directions are above the horizon.
+
+    Differentiable w.r.t. the model's parameters (a jitted, chunked evaluation); ``valid`` is numpy.
+    """
+    brdf = rgb_brdf(brdf)
+    u, v, _, above = merl_grid(tuple(int(r) for r in resolution))
+    vals = _evaluate(brdf, jnp.asarray(u, dtype), jnp.asarray(v, dtype))
+    return jnp.where(jnp.asarray(above)[:, None], vals, 0.0).T, np.asarray(above)
+
+
+def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) -> Path:
+    """Write ``brdf`` as a MERL ``.binary`` file (ALTA's ``brdf2data``), readable by BRDF Explorer, MERL-reading
+    renderers and :func:`polyjax.data.load_merl_binary`.
+
+    Args:
+        brdf: a :class:`polyjax.PolynomialBRDF` (batch ``()``, ``(1,)`` or ``(3,)``), ``NeuralBRDF``,
+            ``TabulatedBRDF``, a baseline closure: any ``f(u, v) -> (..., 3)`` or ``(...)``.
+        path: the file to write (34,992,012 bytes at MERL's resolution).
+        resolution: ``(N_h, N_d, N_p)``; MERL's ``(90, 90, 180)`` by default.
+
+    Returns:
+        The path written. Not differentiable (file output); :func:`tabulate_merl` is.
+    """
+    vals, above = tabulate_merl(brdf, resolution)
+    vals = np.maximum(np.asarray(vals, np.float64), 0.0)
+    mask = np.broadcast_to(above, vals.shape) & np.isfinite(vals)
+    return write_merl_binary(path, vals, resolution=resolution, mask=mask)
+
+
+__all__ = ["merl_binary", "tabulate_merl"]

@@ -1,0 +1,356 @@
+"""Exports: GLSL / BRDF Explorer (compiled, and the numpy print of the same program against the model),
+MERL .binary round trip, the Mitsuba 3 plugin (chi-square, evaluation, a rendered sphere against polyjax's)."""
+
+import glob
+import os
+import shutil
+import subprocess
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import polyjax as pj
+import polyjax.export as ex
+
+from _sampling_problems import GRAZING, NORMAL, OBLIQUE, TABLE, chi2_pvalue, cook_torrance, glossy_polynomial, neural
+
+GLSLANG = shutil.which("glslangValidator")
+
+
+def _llvm_path():
+    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return os.environ["DRJIT_LIBLLVM_PATH"]
+    found = sorted(glob.glob("/usr/lib/*/libLLVM.so.19*") + glob.glob("/usr/lib/*/libLLVM-19.so*"))
+    return found[0] if found else None
+
+
+def _mitsuba(variant):
+    if variant.startswith("llvm"):
+        path = _llvm_path()
+        if path is None:
+            pytest.skip("libLLVM (Debian libllvm19) not found for Mitsuba's LLVM variants")
+        os.environ.setdefault("DRJIT_LIBLLVM_PATH", path)
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant(variant)
+    return mi
+
+
+def _models():
+    """Polynomial models of every variable set, basis and interaction flag (fitted to the synthetic data)."""
+    data = pj.data.synthetic_default()
+    out = {}
+    for var in ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley"):
+        out[var] = pj.fit_polynomial(data, variables=var, degree=5)
+    out["monomial"] = pj.fit_polynomial(data, variables="lafortune", degree=4, basis="monomial")
+    out["interactions"] = pj.fit_polynomial(data, variables="ashikhmin-shirley", degree=3, interactions=True)
+    out["grey"] = pj.fit_polynomial(data, variables="ward", degree=6)[2]
+    return out
+
+
+MODELS = _models()
+
+
+def _directions(n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    w = rng.normal(size=(2, n, 3))
+    w[..., 2] = np.abs(w[..., 2])
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    w[0, :10, 2] *= -1  # a few below the horizon
+    return w[0], w[1]
+
+
+def _rgb(model, u, v):
+    return np.asarray(pj.render.evaluate_rgb(pj.render.rgb_brdf(model), jnp.asarray(u), jnp.asarray(v)))
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_numpy_print_matches_model(name):
+    model = MODELS[name]
+    u, v = _directions()
+    got = ex.numpy_function(model)(u, v)
+    want = _rgb(model, u, v)
+    scale = np.max(np.abs(want), axis=0)
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6 * float(scale.max()))
+    assert np.max(np.abs(got - want) / np.maximum(np.abs(want), 1e-3 * scale)) < 1e-6
+    np.testing.assert_array_equal(got[:10], 0.0)
+
+
+@pytest.mark.data
+def test_numpy_print_matches_neural_model():
+    brdf = neural()
+    u, v = _directions()
+    u[10] = v[10] * np.array([-1.0, -1.0, 1.0])  # mirror pair: half vector at the pole
+    got = ex.numpy_function(brdf)(u, v)
+    want = _rgb(jax.tree.map(lambda a: jnp.asarray(a, jnp.float64) if eqx_inexact(a) else a, brdf), u, v)
+    scale = float(np.max(np.abs(want)))
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9 * scale)
+    np.testing.assert_array_equal(got[:10], 0.0)
+
+
+@pytest.mark.data
+@pytest.mark.skipif(GLSLANG is None, reason="glslangValidator (Debian glslang-tools) not installed")
+def test_glsl_of_neural_model_compiles(tmp_path):
+    path = ex.brdf_explorer(neural(), tmp_path / "neural.brdf")
+    src = ex.glsl(neural())
+    assert src.strip() in path.read_text()
+    frag = tmp_path / "neural.frag"
+    frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
+                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
+                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def eqx_inexact(a):
+    return hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
+
+
+def test_numpy_print_detects_a_changed_coefficient():
+    model = MODELS["lafortune"]
+    bumped = jax.tree.map(lambda a: a, model)
+    bumped = pj.PolynomialBRDF(**{**{k: getattr(model, k) for k in model.__dataclass_fields__},
+                                  "coefficients": model.coefficients.at[0, 3].add(1e-4)})
+    u, v = _directions()
+    assert np.max(np.abs(ex.numpy_function(bumped)(u, v) - _rgb(model, u, v))) > 1e-6
+
+
+@pytest.mark.skipif(GLSLANG is None, reason="glslangValidator (Debian glslang-tools) not installed")
+@pytest.mark.parametrize("name", list(MODELS))
+def test_glsl_compiles(name, tmp_path):
+    src = ex.glsl(MODELS[name])
+    assert "vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)" in src
+    frag = tmp_path / "brdf.frag"
+    frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
+                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
+                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.mark.skipif(GLSLANG is None, reason="glslangValidator (Debian glslang-tools) not installed")
+def test_glsl_compiler_rejects_broken_source(tmp_path):
+    """The compile test can fail: a truncated shader does not compile."""
+    src = ex.glsl(MODELS["ward"])
+    frag = tmp_path / "broken.frag"
+    frag.write_text("#version 330\nout vec4 colour;\n" + src[: len(src) // 2] + "\nvoid main() {}\n")
+    assert subprocess.run([GLSLANG, str(frag)], capture_output=True).returncode != 0
+
+
+def test_brdf_explorer_file(tmp_path):
+    path = ex.brdf_explorer(MODELS["lafortune"], tmp_path / "fit.brdf")
+    text = path.read_text()
+    lines = text.splitlines()
+    assert lines[0] == "analytic"
+    i, j = lines.index("::begin shader"), lines.index("::end shader")
+    assert lines.index("::begin parameters") < lines.index("::end parameters") < i < j
+    assert "\n".join(lines[i + 1:j]).strip() == ex.glsl(MODELS["lafortune"]).strip()
+
+
+def test_unsupported_models_raise():
+    with pytest.raises(pj.InputError, match="PolynomialBRDF"):
+        ex.glsl(cook_torrance())
+    data = pj.data.synthetic_default()
+    with pytest.raises(pj.InputError, match="batch shape"):
+        ex.glsl(pj.fit_polynomial(data, variables="ward", degree=[2, 3]))
+
+
+# --------------------------------------------------------------------------- MERL
+
+
+@pytest.mark.parametrize("which", ["polynomial", "baseline"])
+def test_merl_binary_round_trip(which, tmp_path):
+    brdf = MODELS["lafortune"] if which == "polynomial" else cook_torrance()
+    path = ex.merl_binary(brdf, tmp_path / "fit.binary")
+    assert path.stat().st_size == 34_992_012
+    values, res = pj.data.read_merl_binary(path)
+    assert res == (90, 90, 180)
+    u, v, _, above = pj.data.merl_grid()
+    want = np.maximum(_rgb(brdf, u[above], v[above]), 0.0).T
+    np.testing.assert_allclose(values[:, above], want, rtol=1e-9, atol=1e-300)  # x / scale * scale
+    assert np.all(values[:, ~above] < 0)  # below the horizon: MERL's "missing"
+    data = pj.data.load_merl_binary(path)
+    np.testing.assert_allclose(np.asarray(data.values), want, rtol=1e-9)
+
+
+@pytest.mark.data
+def test_merl_binary_of_neural_material(tmp_path):
+    brdf = neural()
+    path = ex.merl_binary(brdf, tmp_path / "neural.binary")
+    data = pj.data.load_merl_binary(path)
+    u, v, _, above = pj.data.merl_grid()
+    np.testing.assert_allclose(np.asarray(data.values), _rgb(brdf, u[above], v[above]).T, rtol=1e-9)
+    # the loader evaluates the network from the bins' angles in float32: the same table up to that rounding
+    reference = pj.data.load_merl_nbrdf(brdf.name)
+    np.testing.assert_allclose(np.asarray(data.values), np.asarray(reference.values), rtol=5e-3, atol=1e-5)
+
+
+# --------------------------------------------------------------------------- Mitsuba
+
+
+@pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_rgb"])
+def test_mitsuba_eval_and_pdf_match_polyjax(variant):
+    mi = _mitsuba(variant)
+    import drjit as dr
+
+    model = MODELS["lafortune"]
+    bsdf = ex.mitsuba_bsdf(model, resolution=48)
+    sampler = pj.render.importance_sampler(model, resolution=48)
+    u, v = _directions(40, seed=3)
+    u[:10, 2] = np.abs(u[:10, 2])
+    ctx = mi.BSDFContext()
+    for a, b in zip(u[:12], v[:12]):
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.wi = mi.Vector3f(*map(float, b))
+        val, pdf = bsdf.eval_pdf(ctx, si, mi.Vector3f(*map(float, a)))
+        np.testing.assert_allclose(np.ravel(val), _rgb(model, a, b) * a[2], rtol=2e-5, atol=1e-6)
+        want = float(sampler.pdf(jnp.asarray(a), jnp.asarray(b)))
+        assert abs(float(np.ravel(pdf)[0]) - want) <= 1e-4 * want or variant == "llvm_ad_rgb"
+
+
+@pytest.mark.data
+def test_mitsuba_eval_of_neural_model_matches_polyjax():
+    mi = _mitsuba("llvm_ad_rgb")
+    import drjit as dr
+
+    brdf = neural()
+    bsdf = ex.mitsuba_bsdf(brdf, resolution=TABLE)
+    u, v = _directions(2000, seed=5)
+    u[:, 2] = np.abs(u[:, 2]) + 0.01
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(u))
+    si.wi = mi.Vector3f(*(mi.Float(c.astype(np.float32)) for c in v.T))
+    val = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*(mi.Float(c.astype(np.float32)) for c in u.T)))
+    got = np.stack([np.asarray(val[i]) for i in range(3)], -1)
+    want = _rgb(brdf, u, v) * u[:, 2:3]
+    np.testing.assert_allclose(got, want, rtol=1e-3, atol=1e-4 * float(want.max()))  # float32 in Mitsuba
+
+
+def _mitsuba_chi2(mi, brdf, view, tmp_path, monkeypatch):
+    """Mitsuba's own test. Its trapezoid integration of the density (float32) is coarse for a piecewise-constant
+    density with a sharp lobe, hence the many integration points per bin (ires)."""
+    monkeypatch.chdir(tmp_path)  # the test writes chi2_data.py on failure
+    name = ex.register_mitsuba_bsdf(brdf, "polyjax_chi2", resolution=TABLE)
+    sample_func, pdf_func = mi.chi2.BSDFAdapter(name, {"type": name}, wi=[float(x) for x in view])
+    test = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
+                                 sample_dim=3, sample_count=400_000, res=30, ires=96)
+    assert test.run(), test.messages
+
+
+@pytest.mark.parametrize("view", [NORMAL, OBLIQUE, GRAZING], ids=["normal", "oblique", "grazing"])
+def test_mitsuba_chi2_polynomial(view, tmp_path, monkeypatch):
+    mi = _mitsuba("llvm_ad_rgb")
+    _mitsuba_chi2(mi, MODELS["lafortune"], view, tmp_path, monkeypatch)
+
+
+@pytest.mark.parametrize("view", [NORMAL, OBLIQUE, GRAZING], ids=["normal", "oblique", "grazing"])
+def test_mitsuba_samples_exact_chi2_baseline(view):
+    _mitsuba_samples_exact_chi2(cook_torrance(), view)
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("view", [NORMAL, GRAZING], ids=["normal", "grazing"])
+def test_mitsuba_samples_exact_chi2_neural(view):
+    _mitsuba_samples_exact_chi2(neural(), view)
+
+
+def _mitsuba_samples_exact_chi2(brdf, view):
+    """Samples drawn by the plugin in Mitsuba against polyjax's density, with the exact quadrature of
+    ``_sampling_problems`` (Mitsuba's float32 trapezoid rule is too coarse for this sharp a piecewise-constant
+    density: it rejects at p ~ 0.003 at normal view from integration error alone)."""
+    mi = _mitsuba("llvm_ad_rgb")
+    import drjit as dr
+
+    bsdf = ex.mitsuba_bsdf(brdf, resolution=TABLE)
+    s = pj.render.importance_sampler(brdf, resolution=TABLE)
+    n = 400_000
+    x = np.random.default_rng(1).random((n, 3)).astype(np.float32)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(*map(float, view))
+    bs, weight = bsdf.sample(mi.BSDFContext(), si, mi.Float(x[:, 0]), mi.Point2f(mi.Float(x[:, 1]), mi.Float(x[:, 2])))
+    u = np.stack([np.asarray(bs.wo.x), np.asarray(bs.wo.y), np.asarray(bs.wo.z)], -1).astype(np.float64)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    phi = np.arctan2(view[1], view[0])
+    c, sn = np.cos(phi), np.sin(phi)
+    back = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])
+    pdf_m = np.asarray(bs.pdf)
+    pdf_p = np.asarray(s.pdf(jnp.asarray(u), jnp.asarray(view)))
+    assert np.mean(np.abs(pdf_m - pdf_p) > 1e-4 * pdf_p) < 1e-4  # float32: a few samples on cell edges
+    weight = np.stack([np.asarray(weight[i]) for i in range(3)], -1)  # tabulated on the MERL grid
+    assert np.all(np.isfinite(weight)) and np.all(weight >= 0) and np.mean(weight.max(axis=1) > 0) > 0.999
+    assert chi2_pvalue(u @ back.T, lambda w: s.pdf(w, jnp.asarray(back @ view))) > 1e-3
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("view", [NORMAL, GRAZING], ids=["normal", "grazing"])
+def test_mitsuba_chi2_glossy_merl(view, tmp_path, monkeypatch):
+    mi = _mitsuba("llvm_ad_rgb")
+    _mitsuba_chi2(mi, glossy_polynomial(), view, tmp_path, monkeypatch)
+
+
+def test_mitsuba_sphere_matches_polyjax_render():
+    """A sphere under a directional light: Mitsuba (64 x 64, 256 spp, box filter) against polyjax's render
+    (8 x 8 supersampled pixel centres, averaged). The mirrored image must not match (the check can fail)."""
+    mi = _mitsuba("llvm_ad_rgb")
+    import polyjax.render as pr
+    from _render_problems import LIGHT_DIR, ortho_camera
+
+    model = MODELS["lafortune"]
+    size, ss = 64, 8
+    scene = pr.Scene(ortho_camera(size * ss), [pr.Sphere(model)], [pr.DirectionalLight(LIGHT_DIR, irradiance=np.pi)])
+    ref = np.asarray(pr.render(scene, dtype=jnp.float64).image).reshape(size, ss, size, ss, 3).mean(axis=(1, 3))
+    name = ex.register_mitsuba_bsdf(model, "polyjax_psnr")
+    T = mi.ScalarTransform4f
+    to_world = T().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]) @ T().scale([1.05, 1.05, 1])
+    mscene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "sensor": {"type": "orthographic",
+                   "to_world": to_world,
+                   "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
+                            "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": 256}},
+        "sphere": {"type": "sphere", "bsdf": {"type": name}},
+        "light": {"type": "directional", "direction": [float(-x) for x in LIGHT_DIR],
+                  "irradiance": {"type": "rgb", "value": [float(np.pi)] * 3}},
+    })
+    img = np.asarray(mi.render(mscene), dtype=np.float64)
+    assert float(pj.psnr(img, ref)) >= 40.0
+    assert float(pj.psnr(img[:, ::-1], ref)) < 30.0
+
+
+def test_cli_export_every_format(tmp_path, capsys):
+    from polyjax._cli import main
+
+    model = MODELS["ward"]
+    src = pj.save_model(tmp_path / "fit.npz", model)
+    for fmt, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf"), ("merl", ".binary"), ("mitsuba", ".py")):
+        assert main(["export", str(src), "--to", fmt]) == 0
+        out = src.with_suffix(suffix)
+        assert out.is_file() and f"wrote {out}" in capsys.readouterr().out
+    assert src.with_suffix(".glsl").read_text() == ex.glsl(model)
+    values, _ = pj.data.read_merl_binary(src.with_suffix(".binary"))
+    u, v, _, above = pj.data.merl_grid()
+    np.testing.assert_allclose(values[:, above], np.maximum(_rgb(model, u[above], v[above]), 0.0).T, rtol=1e-9)
+    ns = {}
+    exec(src.with_suffix(".py").read_text(), ns)
+    assert ns["MODEL"] == str(src.resolve()) and callable(ns["register"])
+    assert main(["export", str(src), "--to", "glsl", "--index", "0", "--out", str(tmp_path / "red.glsl")]) == 0
+    assert (tmp_path / "red.glsl").read_text() == ex.glsl(model[0])
+    assert main(["export", str(src), "--to", "glsl", "--index", "5"]) == 2
+    assert "--index" in capsys.readouterr().err
+
+
+def test_tabulate_merl_is_differentiable():
+    model = MODELS["lafortune"]
+
+    def total(coef):
+        m = pj.PolynomialBRDF(**{**{k: getattr(model, k) for k in model.__dataclass_fields__}, "coefficients": coef})
+        vals, _ = ex.tabulate_merl(m, resolution=(9, 9, 18))
+        return jnp.sum(vals)
+
+    g = jax.grad(total)(model.coefficients)
+    d = jnp.zeros_like(model.coefficients).at[2, 1].set(1e-4)
+    fd = (total(model.coefficients + d) - total(model.coefficients - d)) / 2e-4
+    np.testing.assert_allclose(float(g[2, 1]), float(fd), rtol=1e-7)
