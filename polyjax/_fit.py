@@ -21,17 +21,25 @@ from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._variables import get_variables
 
+#: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
+LANE_BLOCK = 1024
+
 
 @functools.partial(
-    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg"),
+    jax.jit,
+    static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "lane_block"),
 )
-def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg):
-    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays."""
-    u, v, values = inp.u, inp.v, inp.values
-    x = get_variables(variables).fn(u, v)
-    k = x.shape[-1]
-    w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
-    tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
+def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
+                lane_block=LANE_BLOCK):
+    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays.
+
+    Lanes with samples of their own (per-lane weights, masks or directions) are fitted group by group (a group:
+    the lanes sharing one set of samples, e.g. a texel's colour channels), ``lane_block`` lanes at a time:
+    :func:`jax.lax.map` over blocks, ``vmap`` inside a block, so memory is bounded by the block, not the batch.
+    """
+    values = inp.values
+    var_fn = get_variables(variables).fn
+    tdeg = jnp.asarray(term_degrees(get_variables(variables).k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
     n_deg, nb = degrees.shape[0], values.shape[0]
 
@@ -43,7 +51,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
         return jnp.where(den > 0, l2, jnp.inf)
 
-    def lane(y, wl, wc2l):
+    def lane(x, y, wl, wc2l):
         """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
         keep = wl > 0
         pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
@@ -53,17 +61,33 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
     if inp.shared:  # one design, one factorisation, nb right-hand sides
-        tr, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+        w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)  # (1, n)
+        tr, coef, l2, rank, cond, n_act, n_used = lane(var_fn(inp.u, inp.v), values, w[0], wc2[0])
         tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
-    else:
-        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))
-        tr, coef, l2, rank, cond, n_act, n_used = per_lane(values, w, wc2)
-        coef, l2 = jnp.swapaxes(coef[:, :, 0], 0, 1), jnp.swapaxes(l2[:, :, 0], 0, 1)  # lane axis after degrees
-        rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
-        tr = tuple(jnp.broadcast_to(a[None], (n_deg,) + a.shape) for a in tr)
-        n_used = jnp.broadcast_to(n_used[None], (n_deg, nb))
+    else:  # groups of r lanes, each group with its own samples
+        n_groups = inp.groups
+        r = nb // n_groups
+        x_shared = None if inp.lane_directions else var_fn(inp.u, inp.v)
+
+        def group(args):
+            y, wl, ml = args[:3]
+            ul, vl = args[3:] if inp.lane_directions else (inp.u, inp.v)
+            x = var_fn(ul, vl) if inp.lane_directions else x_shared
+            wg, wc2g = fit_weights(ul, vl, wl, ml, cutoff_deg)
+            return lane(x, y, wg, wc2g)
+
+        args = (values.reshape(n_groups, r, -1), inp.weights, inp.mask)
+        if inp.lane_directions:
+            args = args + (inp.u, inp.v)
+        tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, args, batch_size=max(1, lane_block // r))
+        # (G, D, r, ...) -> lane axis (G r) after the degree axis
+        coef = jnp.swapaxes(coef, 0, 1).reshape((n_deg, nb) + coef.shape[3:])
+        l2 = jnp.swapaxes(l2, 0, 1).reshape(n_deg, nb)
+        rank, cond, n_act = (jnp.repeat(jnp.swapaxes(a, 0, 1), r, axis=1) for a in (rank, cond, n_act))
+        tr = tuple(jnp.broadcast_to(jnp.repeat(a, r, axis=0)[None], (n_deg, nb) + a.shape[1:]) for a in tr)
+        n_used = jnp.broadcast_to(jnp.repeat(n_used, r)[None], (n_deg, nb))
     bad = jnp.broadcast_to(inp.lane_bad[None, :], (n_deg, nb))
     status = jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE)  # an overflowing L2 is not OK
     status = jnp.where(rank < n_act, Result.RANK_DEFICIENT, status)
@@ -110,6 +134,7 @@ def fit_polynomial(
     rank_deficient: str = "flag",
     nonfinite: str = "error",
     throw: bool = False,
+    lane_block: int = LANE_BLOCK,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
 
@@ -123,8 +148,11 @@ def fit_polynomial(
 
     Args:
         u: ``(n, 3)`` light directions, or a :class:`polyjax.Measurements` (then ``v``/``values``
-           and its ``weights``/``mask`` are taken from it).
-        v: ``(n, 3)`` view directions.
+           and its ``weights``/``mask`` are taken from it), or ``(*dbatch, n, 3)``: directions of their own for
+           every lane (each texel of a capture), ``dbatch`` a leading part of the batch shape of ``values``
+           (``values (H, W, 3, n)``, ``u (H, W, n, 3)``: a texel's channels share its directions and its design).
+           Each such lane gets its own PCA and design, exactly as if fitted alone.
+        v: view directions, the shape of ``u``.
         values: ``(*batch, n)`` measured BRDF, samples last; every leading axis (materials, channels)
            is fitted independently in the same call.
            The fit runs in the dtype of ``values`` (float32 or float64; integers are converted to the
@@ -132,8 +160,10 @@ def fit_polynomial(
         variables: a registered variable set: ``"ward"``, ``"ashikhmin-shirley"``, ``"lafortune"``,
            ``"lafortune-anisotropic"`` or a user's own.
         degree: ``p``, or a sequence of degrees: the result then has a leading degree axis.
-        weights: solid-angle weights ``w_i`` (``(n,)`` or ``(*batch, n)``), ones by default.
-        mask: ``(n,)`` (shared by every lane) or ``(*batch, n)`` validity mask; False samples are not fitted.
+        weights: solid-angle weights ``w_i`` (``(n,)`` or ``(*batch, n)``; ``(*dbatch, n)`` with per-lane
+           directions), ones by default.
+        mask: ``(n,)`` (shared by every lane) or ``(*batch, n)`` (``(*dbatch, n)``) validity mask; False samples
+           are not fitted.
         cutoff_deg: grazing cutoff in degrees (80 in the paper); None keeps all samples above the horizon.
         basis: ``"legendre"`` (default, well conditioned) or ``"monomial"`` (the paper's literal powers);
            both span the same space and give the same fit.
@@ -149,6 +179,13 @@ def fit_polynomial(
            (rank-deficient, no samples, non-finite values or L2); under ``jit`` an
            :func:`equinox.error_if` error with that code's message. Lanes with no samples are always
            ``NO_SAMPLES`` (L2 = inf); a lane whose L2 overflows is ``NONFINITE``.
+        lane_block: lanes fitted at once when lanes have samples of their own (per-lane weights, masks or
+           directions): a :func:`jax.lax.map` over blocks of lanes, ``vmap`` inside a block, so memory grows with
+           the block (about ``lane_block * n * m`` floats), not with the batch. Same results for any block size.
+
+    Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
+    e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
+    (:func:`jax.shard_map`), and the result comes back sharded the same way (``docs/scale.md``).
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
@@ -158,14 +195,17 @@ def fit_polynomial(
         u, v, variables = u, None, v
     vs = get_variables(variables)
     degrees = _check_options(basis, method, rank_deficient, degree)
+    if not isinstance(lane_block, (int, np.integer)) or isinstance(lane_block, bool) or lane_block < 1:
+        raise InputError(f"lane_block: expected a positive integer, found {lane_block!r}")
     inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg,
-                                 nonfinite=nonfinite)
+                                 nonfinite=nonfinite, lane_directions=True)
     max_degree = int(degrees.max())
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
     out = _fit_kernel(inp, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff)
+                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
+                      lane_block=int(lane_block))
     scalar = np.ndim(degree) == 0
     lead = () if scalar else (degrees.size,)
     out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}

@@ -4,6 +4,11 @@ Rules, the same for every fitter and with the same messages:
 
 * ``u``, ``v``: ``(n, 3)`` directions, renormalised; a zero (or non-finite) vector has no direction and its sample
   is dropped. ``values``: ``(*batch, n)``, samples last, ``n >= 1``.
+* Per-lane directions (only for fitters that ask for them, ``lane_directions=True``): ``u``, ``v`` of shape
+  ``(*dbatch, n, 3)`` with ``dbatch`` a leading part of ``batch`` (``values (H, W, 3, n)`` with ``u (H, W, n, 3)``:
+  each texel its own directions, shared by its colour channels). The lanes then form ``G = prod(dbatch)`` groups
+  of ``r = prod(batch[len(dbatch):])`` right-hand sides; ``weights`` and ``mask`` are ``(n,)``, ``(*dbatch, n)``
+  or, when ``dbatch == batch``, ``(*batch, n)``.
 * dtype: the fit runs in the dtype of ``values``; integers and booleans become the default float, float16 and
   bfloat16 float32 (LAPACK has no half precision); complex values are rejected.
 * ``weights``: ``(n,)`` (shared by every lane) or ``(*batch, n)``; finite and non-negative. ``mask``: ``(n,)``
@@ -41,38 +46,55 @@ class PreparedInputs(eqx.Module):
     """Validated, flattened inputs of a fit.
 
     Attributes:
-        u, v: ``(n, 3)`` unit directions.
+        u, v: ``(n, 3)`` unit directions, or ``(G, n, 3)`` per group of lanes (``lane_directions``).
         values: ``(B, n)`` values, ``B = prod(batch)``; non-finite entries replaced by 0 (they are masked or
             their lane is flagged).
-        weights: ``(L, n)`` solid-angle weights, ``L = 1`` when shared by every lane, else ``B``.
+        weights: ``(L, n)`` solid-angle weights, ``L = 1`` when shared by every lane, else ``G``: the number of
+            groups of lanes with their own samples (``G = B`` without per-lane directions; lanes ``g r .. g r + r``
+            form group ``g``, ``r = B / G``).
         mask: ``(L, n)`` samples to fit (directions valid, mask, finite values with ``nonfinite="mask"``).
         lane_bad: ``(B,)`` lanes with NaN/inf values where the mask is True (only traced input gets here).
         batch: the batch shape ``values.shape[:-1]``.
-        shared: True when ``L = 1``.
+        shared: True when every lane has the same samples (one design, ``L = 1``, directions ``(n, 3)``).
+        lane_directions: True when ``u``, ``v`` are ``(G, n, 3)``.
     """
 
-    u: Float[Array, "n 3"]
-    v: Float[Array, "n 3"]
+    u: Float[Array, "*G n 3"]
+    v: Float[Array, "*G n 3"]
     values: Float[Array, "B n"]
     weights: Float[Array, "L n"]
     mask: Bool[Array, "L n"]
     lane_bad: Bool[Array, " B"]
     batch: tuple[int, ...] = eqx.field(static=True)
     shared: bool = eqx.field(static=True)
+    lane_directions: bool = eqx.field(static=True, default=False)
 
     @property
     def n(self) -> int:
         return self.values.shape[-1]
 
+    @property
+    def groups(self) -> int:
+        """``G``, the number of groups of lanes with their own samples (1 when shared)."""
+        if self.lane_directions:
+            return self.u.shape[0]
+        return 1 if self.shared else self.values.shape[0]
+
     def per_lane(self) -> tuple[Float[Array, "B n"], Bool[Array, "B n"]]:
         """``weights`` and ``mask`` broadcast to one row per lane."""
         shape = self.values.shape
-        return jnp.broadcast_to(self.weights, shape), jnp.broadcast_to(self.mask, shape)
+        r = shape[0] // max(self.weights.shape[0], 1)
+        w, m = (jnp.repeat(a, r, axis=0) if a.shape[0] > 1 else a for a in (self.weights, self.mask))
+        return jnp.broadcast_to(w, shape), jnp.broadcast_to(m, shape)
 
     def objective_weights(self, cutoff_deg) -> tuple[Float[Array, "B n"], Float[Array, "B n"]]:
         """Per lane ``(w, w cos^2 theta_u)`` of equation (11) (:func:`polyjax.fit_weights`), 0 where not fitted."""
         w, m = self.per_lane()
-        return fit_weights(self.u, self.v, w, m, cutoff_deg)
+        u, v = self.u, self.v
+        if self.lane_directions:
+            r = self.values.shape[0] // self.groups
+            u, v = jnp.repeat(u, r, axis=0), jnp.repeat(v, r, axis=0)
+        return fit_weights(u, v, w, m, cutoff_deg)
 
 
 def is_concrete(*xs) -> bool:
@@ -128,31 +150,41 @@ def _lane_shape_error(name: str, found, n: int, batch) -> InputError:
     return InputError(f"{name}: expected shape {want} (samples last, n = len(u) = {n}), found {tuple(found)}")
 
 
-def _check_directions(u, v, concrete: bool) -> int:
+def _check_directions(u, v, concrete: bool, lane_directions: bool = False) -> int:
     for name, w in (("u", u), ("v", v)):
-        if w.ndim != 2 or w.shape[-1] != 3:
-            raise InputError(f"{name}: expected directions of shape (n, 3), found {w.shape}")
-        if concrete and not np.all(np.isfinite(np.asarray(w))):
+        if (w.ndim != 2 and not (lane_directions and w.ndim > 2)) or w.shape[-1] != 3:
+            want = "(n, 3) or (*batch, n, 3)" if lane_directions else "(n, 3)"
+            raise InputError(f"{name}: expected directions of shape {want}, found {w.shape}")
+        # a reduction on the device(s): a sharded input is never gathered to the host
+        if concrete and not bool(jnp.all(jnp.isfinite(w))):
             raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
     if u.shape != v.shape:
-        raise InputError(f"u and v: expected the same shape (n, 3), found {u.shape} and {v.shape}")
-    return u.shape[0]
+        raise InputError(f"u and v: expected the same shape, found {u.shape} and {v.shape}")
+    return u.shape[-2]
 
 
-def _lane_array(name, a, n, batch, dtype):
-    """``weights``/``mask`` as ``(1, n)`` (shared) or ``(B, n)``; the shape rule of the module."""
+def _lane_array(name, a, n, batch, dtype, dbatch=None):
+    """``weights``/``mask`` as ``(1, n)`` (shared) or ``(G, n)``; the shape rule of the module."""
     a = jnp.asarray(a, dtype)
     if a.shape == (n,):
         return a[None]
-    if tuple(a.shape) == tuple(batch) + (n,):
+    group = tuple(batch) if dbatch is None else tuple(dbatch)
+    if tuple(a.shape) == group + (n,):
         return a.reshape(-1, n)
+    if dbatch is not None:
+        raise InputError(f"{name}: expected shape ({n},) or {group + (n,)} (one row per set of directions; samples "
+                         f"last, n = {n}), found {tuple(a.shape)}")
     raise _lane_shape_error(name, a.shape, n, batch)
 
 
 def prepare_inputs(
     caller: str, u, v, values, weights=None, mask=None, *, cutoff_deg=80.0, nonfinite: str = "error",
+    lane_directions: bool = False,
 ) -> tuple[PreparedInputs, float | None]:
     """Check and flatten a fit's inputs (see the module's rules); returns ``(PreparedInputs, cutoff_deg)``.
+
+    ``lane_directions=True`` (for fitters that handle it) also accepts directions ``(*dbatch, n, 3)``, one set per
+    group of lanes (see the module's rules).
 
     Raises :class:`polyjax.InputError` naming the argument, what was expected and what was found, before any
     work is done.
@@ -165,7 +197,7 @@ def prepare_inputs(
     values = jnp.asarray(values, dtype)
     u = jnp.asarray(u, dtype)
     v = jnp.asarray(v, dtype)
-    n = _check_directions(u, v, is_concrete(u, v))
+    n = _check_directions(u, v, is_concrete(u, v), lane_directions)
     if values.ndim < 1 or values.shape[-1] != n:
         raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
     if n == 0 or values.size == 0:
@@ -173,33 +205,51 @@ def prepare_inputs(
                          f"{values.shape}")
     batch = tuple(values.shape[:-1])
     nb = int(np.prod(batch)) if batch else 1
+    dbatch = tuple(u.shape[:-2])
+    per_lane_dirs = u.ndim > 2
+    if per_lane_dirs and batch[: len(dbatch)] != dbatch:
+        raise InputError(f"u, v: expected per-lane directions of shape (*batch, n, 3) with batch a leading part of "
+                         f"values' batch shape {batch} (values {values.shape}), found {u.shape}")
+    n_groups = int(np.prod(dbatch)) if per_lane_dirs else nb
     y = values.reshape(nb, n)
-    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype)
-    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool)
+    lane_shape = dbatch if per_lane_dirs and dbatch != batch else None
+    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype, lane_shape)
+    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, lane_shape)
     if is_concrete(w) and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
+    if per_lane_dirs:
+        u, v = u.reshape(n_groups, n, 3), v.reshape(n_groups, n, 3)
     u, ok_u = safe_normalize(u)
     v, ok_v = safe_normalize(v)
-    m = m & (ok_u & ok_v)[None]
+    ok = ok_u & ok_v
+    m = m & (ok if per_lane_dirs else ok[None])
     finite = jnp.isfinite(y)
-    bad = m & ~finite  # (B, n)
+    r = nb // n_groups
+    m_lanes = jnp.repeat(m, r, axis=0) if m.shape[0] > 1 and r > 1 else m
+    bad = m_lanes & ~finite  # (B, n)
     if nonfinite == "error" and is_concrete(y, m) and bool(jnp.any(bad)):
         where = np.argwhere(np.asarray(bad).reshape(values.shape))
         raise InputError(
             f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
             f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
         )
-    shared = w.shape[0] == 1 and m.shape[0] == 1 and (nonfinite == "error" or nb == 1)
+    shared = (not per_lane_dirs and w.shape[0] == 1 and m.shape[0] == 1
+              and (nonfinite == "error" or nb == 1))
     if nonfinite == "mask":
-        m = m & finite
+        finite_group = jnp.all(finite.reshape(n_groups, -1, n), axis=1)
+        if per_lane_dirs and n_groups != nb and is_concrete(y) and not bool(jnp.all(
+                finite_group == jnp.any(finite.reshape(n_groups, -1, n), axis=1))):
+            raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
+                             f"{tuple(dbatch) + (n, 3)}) needs NaN/inf at the same samples in every lane of a group")
+        m = m & (finite if n_groups == nb else finite_group)
         lane_bad = jnp.zeros((nb,), bool)
     else:
         lane_bad = jnp.any(bad, axis=-1)
     if not shared:
-        w = jnp.broadcast_to(w, (nb, n))
-        m = jnp.broadcast_to(m, (nb, n))
+        w = jnp.broadcast_to(w, (n_groups, n))
+        m = jnp.broadcast_to(m, (n_groups, n))
     y = jnp.where(finite, y, 0.0)
-    return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared), cutoff
+    return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared, per_lane_dirs), cutoff
 
 
 #: a design of more than this many bytes is refused up front (it would not fit in memory on common machines)

