@@ -19,6 +19,7 @@ from ._measurements import Measurements
 from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
+from ._sharding import lane_sharding, shard_lanes
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -71,16 +72,21 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         r = nb // n_groups
         x_shared = None if inp.lane_directions else var_fn(inp.u, inp.v)
 
-        def group(args):
-            y, wl, ml = args[:3]
-            ul, vl = args[3:] if inp.lane_directions else (inp.u, inp.v)
-            x = var_fn(ul, vl) if inp.lane_directions else x_shared
-            wg, wc2g = fit_weights(ul, vl, wl, ml, cutoff_deg)
-            return lane(x, y, wg, wc2g)
-
-        args = (values.reshape(n_groups, r, -1), inp.weights, inp.mask)
+        # per-group arrays are mapped over; (1, n) weights or masks (per-lane directions only) are shared
+        mapped = {"y": values.reshape(n_groups, r, -1)}
+        for name, a in (("w", inp.weights), ("m", inp.mask)):
+            if a.shape[0] > 1:
+                mapped[name] = a
         if inp.lane_directions:
-            args = args + (inp.u, inp.v)
+            mapped.update(u=inp.u, v=inp.v)
+
+        def group(a):
+            ul, vl = (a["u"], a["v"]) if inp.lane_directions else (inp.u, inp.v)
+            x = var_fn(ul, vl) if inp.lane_directions else x_shared
+            wg, wc2g = fit_weights(ul, vl, a.get("w", inp.weights[0]), a.get("m", inp.mask[0]), cutoff_deg)
+            return lane(x, a["y"], wg, wc2g)
+
+        args = mapped
         tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, args, batch_size=max(1, lane_block // r))
         # (G, D, r, ...) -> lane axis (G r) after the degree axis
         coef = jnp.swapaxes(coef, 0, 1).reshape((n_deg, nb) + coef.shape[3:])
@@ -197,15 +203,20 @@ def fit_polynomial(
     degrees = _check_options(basis, method, rank_deficient, degree)
     if not isinstance(lane_block, (int, np.integer)) or isinstance(lane_block, bool) or lane_block < 1:
         raise InputError(f"lane_block: expected a positive integer, found {lane_block!r}")
+    sharded = _input_sharding(u, v, values, weights, mask)
     inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg,
                                  nonfinite=nonfinite, lane_directions=True)
     max_degree = int(degrees.max())
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
-    out = _fit_kernel(inp, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
-                      lane_block=int(lane_block))
+    kernel = functools.partial(_fit_kernel, variables=vs.name, max_degree=max_degree, basis=basis,
+                               interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
+                               lane_block=int(lane_block))
+    if sharded is None:
+        out = kernel(inp, jnp.asarray(degrees, jnp.int32))
+    else:  # each device fits its own lanes; the result stays sharded (polyjax/_sharding.py)
+        out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))
     scalar = np.ndim(degree) == 0
     lead = () if scalar else (degrees.size,)
     out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
@@ -219,6 +230,17 @@ def fit_polynomial(
 
         model = raise_on_status("fit_polynomial", model.status, model, describe)
     return model
+
+
+def _input_sharding(u, v, values, weights, mask):
+    """The mesh and lane axes of inputs sharded over their leading batch axis (``polyjax/_sharding.py``)."""
+    if isinstance(u, Measurements):
+        u, v, values = u.u, u.v, u.values
+    if values is None or not hasattr(values, "shape"):
+        return None
+    nb = np.ndim(values) - 1
+    return lane_sharding(nb, {"values": (values, 1), "u": (u, 2), "v": (v, 2), "weights": (weights, 1),
+                              "mask": (mask, 1)})
 
 
 def n_parameters(variables: str, degree: int, interactions: bool = False) -> int:

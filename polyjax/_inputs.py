@@ -51,7 +51,8 @@ class PreparedInputs(eqx.Module):
             their lane is flagged).
         weights: ``(L, n)`` solid-angle weights, ``L = 1`` when shared by every lane, else ``G``: the number of
             groups of lanes with their own samples (``G = B`` without per-lane directions; lanes ``g r .. g r + r``
-            form group ``g``, ``r = B / G``).
+            form group ``g``, ``r = B / G``). With per-lane directions ``weights`` and ``mask`` may be ``(1, n)``
+            or ``(G, n)`` independently (nothing is broadcast to every lane).
         mask: ``(L, n)`` samples to fit (directions valid, mask, finite values with ``nonfinite="mask"``).
         lane_bad: ``(B,)`` lanes with NaN/inf values where the mask is True (only traced input gets here).
         batch: the batch shape ``values.shape[:-1]``.
@@ -245,7 +246,7 @@ def prepare_inputs(
         lane_bad = jnp.zeros((nb,), bool)
     else:
         lane_bad = jnp.any(bad, axis=-1)
-    if not shared:
+    if not shared and not per_lane_dirs:
         w = jnp.broadcast_to(w, (n_groups, n))
         m = jnp.broadcast_to(m, (n_groups, n))
     y = jnp.where(finite, y, 0.0)

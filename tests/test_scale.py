@@ -73,3 +73,72 @@ def test_per_lane_directions_differentiate():
     check_grads(f, (vals, w, u), order=1, modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)
     g = jax.jit(jax.grad(lambda vals: f(vals, w, u).sum()))(vals)
     assert np.all(np.isfinite(g)) and np.abs(g).max() > 0
+
+
+_SHARDED = r'''
+import json, sys
+import jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+from jax.sharding import NamedSharding, PartitionSpec as P
+import polyjax as pj
+
+mesh = jax.make_mesh((8,), ("x",))  # what users get: Explicit axes by default
+rng = np.random.default_rng(0)
+def dirs(shape):
+    d = rng.normal(size=shape + (3,)); d[..., 2] = np.abs(d[..., 2]) + 0.3
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+u, v, y = dirs((16, 4, 30)), dirs((16, 4, 30)), rng.uniform(0.1, 1.0, size=(16, 4, 3, 30))
+w = rng.uniform(0.5, 2.0, size=(16, 4, 30))
+us, vs, ys, ws = (jax.device_put(a, NamedSharding(mesh, P("x"))) for a in (u, v, y, w))
+out = {"axis_types": str(mesh.axis_types)}
+cases = {
+    "per_lane_directions": (dict(u=us, v=vs, values=ys, weights=ws), dict(u=u, v=v, values=y, weights=w)),
+    "shared_directions": (dict(u=u[0, 0], v=v[0, 0], values=ys), dict(u=u[0, 0], v=v[0, 0], values=y)),
+    "per_lane_weights": (dict(u=u[0, 0], v=v[0, 0], values=ys, weights=jax.device_put(
+        np.broadcast_to(w[:, :, None], y.shape), NamedSharding(mesh, P("x")))),
+        dict(u=u[0, 0], v=v[0, 0], values=y, weights=np.broadcast_to(w[:, :, None], y.shape))),
+}
+for name, (sharded, plain) in cases.items():
+    ms = pj.fit_polynomial(**sharded, variables="lafortune", degree=[2, 3])
+    m0 = pj.fit_polynomial(**plain, variables="lafortune", degree=[2, 3])
+    diff = max(float(np.max(np.abs(np.asarray(getattr(ms, f)) - np.asarray(getattr(m0, f)))))
+               for f in ("coefficients", "l2", "mean", "rotation", "centre", "halfwidth"))
+    shard = ms.coefficients.sharding
+    out[name] = dict(diff=diff, devices=len(shard.device_set), spec=str(shard.spec),
+                     shard_shape=list(shard.shard_shape(ms.coefficients.shape)),
+                     l2_devices=len(ms.l2.sharding.device_set), same_status=bool(np.all(
+                         np.asarray(ms.status) == np.asarray(m0.status))))
+# under jit, traced sharded inputs
+f = jax.jit(lambda u, v, y: pj.fit_polynomial(u, v, y, "ward", degree=3).coefficients)
+c = f(us, vs, ys)
+out["jit"] = dict(diff=float(np.max(np.abs(np.asarray(c) - np.asarray(
+    pj.fit_polynomial(u, v, y, "ward", degree=3).coefficients)))), devices=len(c.sharding.device_set))
+print("RESULT " + json.dumps(out))
+'''
+
+
+def _run(code, env_extra, timeout=600):
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, env=env,
+                       cwd=root)
+    assert p.returncode == 0, p.stderr[-3000:]
+    line = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT "):])
+
+
+def test_sharded_fit_on_8_devices():
+    out = _run(_SHARDED, {"XLA_FLAGS": "--xla_force_host_platform_device_count=8"})
+    assert "Explicit" in out["axis_types"]
+    for name in ("per_lane_directions", "shared_directions", "per_lane_weights"):
+        r = out[name]
+        assert r["diff"] <= 1e-12, (name, r)
+        assert r["devices"] == 8 and r["l2_devices"] == 8 and r["same_status"], (name, r)
+        assert r["spec"].startswith("P(None, 'x'") and r["shard_shape"][:2] == [2, 2], (name, r)
+    assert out["jit"]["diff"] <= 1e-12 and out["jit"]["devices"] == 8
