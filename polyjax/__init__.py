@@ -7,7 +7,7 @@ least squares. Enable float64 in your entry point (``jax.config.update("jax_enab
 for fitting; polyjax does not change global JAX settings on import.
 """
 
-from . import data, export, render
+from . import data, export, render, svbrdf
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._config import DATA_ENV, data_root, has_data_root
@@ -46,5 +46,5 @@ __all__ = [
     "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
     "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
-    "safe_normalize", "save_model", "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
+    "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
 ]

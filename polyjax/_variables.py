@@ -77,7 +77,8 @@ _ALIASES = {"as": "ashikhmin-shirley", "ashikhmin": "ashikhmin-shirley", "laf": 
 
 
 def register_variables(
-    name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False
+    name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False,
+    _check: bool = True,
 ) -> VariableSet:
     """Register a set of explanatory variables under ``name``.
 
@@ -97,6 +98,10 @@ def register_variables(
         raise InputError(f"variables {name!r}: a set of that name exists (pass overwrite=True to replace it)")
     if int(k) < 1:
         raise InputError(f"k: expected a positive number of variables, found {k}")
+    vs = VariableSet(key, fn, int(k), bool(symmetric), description)
+    if not _check:  # the built-in sets: no computation at import (jax.distributed.initialize must come first)
+        _REGISTRY[key] = vs
+        return vs
     import numpy as np
 
     rng = np.random.default_rng(0)
@@ -110,7 +115,6 @@ def register_variables(
         swapped = jnp.asarray(fn(jnp.asarray(w[1]), jnp.asarray(w[0])))
         if not bool(jnp.allclose(out, swapped, rtol=1e-5, atol=1e-6)):
             raise InputError(f"variables {name!r}: declared symmetric but fn(u, v) != fn(v, u)")
-    vs = VariableSet(key, fn, int(k), bool(symmetric), description)
     _REGISTRY[key] = vs
     return vs
 
@@ -137,11 +141,10 @@ def explanatory_variables(name: str, u, v) -> Float[Array, "... k"]:
     return get_variables(name).fn(jnp.asarray(u), jnp.asarray(v))
 
 
-register_variables("ward", _ward, 2, symmetric=True, description="n.h, (n.u)(n.v)  [paper sec. 3.1]")
-register_variables(
-    "ashikhmin-shirley", _ashikhmin_shirley, 3, symmetric=True, description="n.h, v.h, max(n.u, n.v)  [paper eq. (9)]"
-)
-register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]")
-register_variables(
-    "lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True, description="ux vx, uy vy, uz vz  [paper eq. (10)]"
-)
+register_variables("ward", _ward, 2, symmetric=True, description="n.h, (n.u)(n.v)  [paper sec. 3.1]", _check=False)
+register_variables("ashikhmin-shirley", _ashikhmin_shirley, 3, symmetric=True,
+                   description="n.h, v.h, max(n.u, n.v)  [paper eq. (9)]", _check=False)
+register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]",
+                   _check=False)
+register_variables("lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True,
+                   description="ux vx, uy vy, uz vz  [paper eq. (10)]", _check=False)

@@ -142,3 +142,82 @@ def test_sharded_fit_on_8_devices():
         assert r["devices"] == 8 and r["l2_devices"] == 8 and r["same_status"], (name, r)
         assert r["spec"].startswith("P(None, 'x'") and r["shard_shape"][:2] == [2, 2], (name, r)
     assert out["jit"]["diff"] <= 1e-12 and out["jit"]["devices"] == 8
+
+
+_CAPTURE = r'''
+import jax.numpy as jnp
+def phong(kd, ks, n):
+    def f(u, v):
+        r = jnp.stack([-u[..., 0], -u[..., 1], u[..., 2]], -1)
+        c = jnp.clip(jnp.sum(r * v, -1), 0.0, 1.0) ** n
+        return jnp.asarray(kd) / jnp.pi + jnp.asarray(ks) * c[..., None]
+    return f
+MATERIALS = [phong((0.6, 0.3, 0.2), (0.2, 0.2, 0.2), 8.0), phong((0.1, 0.4, 0.6), (0.5, 0.5, 0.5), 20.0)]
+H, W, K = 8, 6, 24
+'''
+
+_PROCESS = _CAPTURE + r'''
+import sys
+from polyjax import svbrdf
+pid, port, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+svbrdf.initialize(f"localhost:{port}", 2, pid)
+import jax
+jax.config.update("jax_enable_x64", True)
+import polyjax as pj
+
+def load_rows(start, stop):  # this process's part of the texture, and nothing else
+    cap = svbrdf.simulate_capture(MATERIALS, H, W, n_lights=K, rows=slice(start, stop))
+    u, v, b, w = cap.observations()
+    return dict(u=u, v=v, values=b, weights=w)
+
+model = svbrdf.fit_rows_distributed(load_rows, H, "lafortune", 3)
+svbrdf.write_texture_shards(out, model)
+print("RESULT " + __import__("json").dumps(dict(
+    process=jax.process_index(), count=jax.process_count(), devices=len(model.coefficients.sharding.device_set),
+    rows=list(svbrdf.local_rows(H)), local=len(model.coefficients.addressable_shards),
+    global_shape=list(model.coefficients.shape))))
+'''
+
+
+def test_two_process_distributed_fit_writes_its_shards(tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from polyjax import svbrdf
+
+    root = Path(__file__).resolve().parents[1]
+    port = svbrdf.free_port()
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env.pop("XLA_FLAGS", None)
+    procs = [subprocess.Popen([sys.executable, "-c", _PROCESS, str(i), str(port), str(tmp_path / "tex")],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=root)
+             for i in range(2)]
+    outs = []
+    try:
+        for p in procs:
+            so, se = p.communicate(timeout=600)
+            assert p.returncode == 0, se[-3000:]
+            outs.append(json.loads([ln for ln in so.splitlines() if ln.startswith("RESULT ")][-1][7:]))
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+    assert [o["count"] for o in outs] == [2, 2] and [o["devices"] for o in outs] == [2, 2]
+    assert [o["rows"] for o in outs] == [[0, 4], [4, 8]] and [o["local"] for o in outs] == [1, 1]
+    meta = json.loads((tmp_path / "tex" / "manifest.json").read_text())
+    assert [s["file"] for s in meta["shards"]] == ["rows-0-4.npz", "rows-4-8.npz"]
+    assert [s["process"] for s in meta["shards"]] == [0, 1]
+    # each process wrote its half; together they equal one single-process fit
+    ns = {}
+    exec(_CAPTURE, ns)
+    cap = svbrdf.simulate_capture(ns["MATERIALS"], ns["H"], ns["W"], n_lights=ns["K"])
+    ref = svbrdf.fit_capture(cap, "lafortune", 3)
+    got = svbrdf.read_texture_shards(tmp_path / "tex")
+    for f in ("coefficients", "l2", "mean", "rotation", "centre", "halfwidth"):
+        np.testing.assert_allclose(getattr(got, f), getattr(ref, f), rtol=1e-12, atol=1e-12, err_msg=f)
+    np.testing.assert_array_equal(got.status, ref.status)
+    half = svbrdf.read_texture_shards(tmp_path / "tex", rows=(4, 8))
+    np.testing.assert_allclose(half.coefficients, ref.coefficients[4:], rtol=1e-12, atol=1e-12)
