@@ -110,7 +110,8 @@ def register_variables(
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
     out = jnp.asarray(fn(jnp.asarray(w[0]), jnp.asarray(w[1])))
     if out.shape != (8, int(k)):
-        raise InputError(f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned {out.shape}")
+        raise InputError(f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned "
+                         f"{out.shape}")
     if symmetric:
         swapped = jnp.asarray(fn(jnp.asarray(w[1]), jnp.asarray(w[0])))
         if not bool(jnp.allclose(out, swapped, rtol=1e-5, atol=1e-6)):
