@@ -255,6 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .export._cli import add_export_parser, run_export
 
     add_export_parser(sub, parents=[common]).set_defaults(func=run_export)
+    from .svbrdf._cli import add_svbrdf_parser
+
+    add_svbrdf_parser(sub, parents=[common])
     return p
 
 

@@ -100,17 +100,27 @@ def _place(a, mesh, spec):
 def shard_lanes(kernel, mesh, axes, inp, *args, out_lane_axis: int = 1):
     """Run ``kernel(inp, *args)`` on every device's block of lanes under :func:`jax.shard_map`.
 
-    ``inp`` is a :class:`polyjax.PreparedInputs` whose lane arrays are sharded over ``axes``; ``args`` are
-    replicated. Every output array has its lane axis at ``out_lane_axis`` and comes back sharded over ``axes``.
+    ``kernel`` is a :func:`functools.partial` of a function with hashable keywords (the compiled program is cached
+    on them, the mesh and the layout); ``inp`` is a :class:`polyjax.PreparedInputs` whose lane arrays are sharded
+    over ``axes``; ``args`` are replicated. Every output array has its lane axis at ``out_lane_axis`` and comes
+    back sharded over ``axes``.
     """
-    lane = P(axes)
-    in_inp = type(inp)(
-        u=lane if inp.lane_directions else P(), v=lane if inp.lane_directions else P(), values=lane,
-        weights=P() if inp.weights.shape[0] == 1 else lane, mask=P() if inp.mask.shape[0] == 1 else lane,
-        lane_bad=lane, batch=inp.batch, shared=inp.shared, lane_directions=inp.lane_directions,
-    )
+    layout = (inp.lane_directions, inp.weights.shape[0] == 1, inp.mask.shape[0] == 1, inp.batch, inp.shared)
+    fn, in_inp = _compiled(kernel.func, tuple(sorted(kernel.keywords.items())), mesh, axes, layout, len(args),
+                           out_lane_axis, type(inp))
     inp = jax.tree.map(lambda a, spec: _place(a, mesh, spec), inp, in_inp)
+    return fn(inp, *args)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(func, keywords, mesh, axes, layout, n_args, out_lane_axis, inp_type):
+    lane_dirs, w_shared, m_shared, batch, shared = layout
+    lane = P(axes)
+    in_inp = inp_type(
+        u=lane if lane_dirs else P(), v=lane if lane_dirs else P(), values=lane, weights=P() if w_shared else lane,
+        mask=P() if m_shared else lane, lane_bad=lane, batch=batch, shared=shared, lane_directions=lane_dirs,
+    )
     out = P(*((None,) * out_lane_axis + (axes,)))
-    fn = jax.shard_map(functools.partial(kernel), mesh=mesh, in_specs=(in_inp,) + (P(),) * len(args),
+    fn = jax.shard_map(functools.partial(func, **dict(keywords)), mesh=mesh, in_specs=(in_inp,) + (P(),) * n_args,
                        out_specs=out, check_vma=False)
-    return jax.jit(fn)(inp, *args)
+    return jax.jit(fn), in_inp

@@ -110,3 +110,17 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
     return PolynomialBRDF(**{n: jax.numpy.asarray(a) for n, a in arrays.items()}, variables=meta["variables"],
                           basis=meta["basis"], interactions=bool(meta["interactions"]),
                           max_degree=int(meta["max_degree"]))
+
+
+def local_part(model: PolynomialBRDF) -> PolynomialBRDF:
+    """The rows of a row-sharded ``model`` held by this process, as an ordinary (local) model."""
+    def part(a):
+        shards = getattr(a, "addressable_shards", None)
+        if not shards or getattr(a, "is_fully_addressable", True):
+            return a
+        seen = {}
+        for s in shards:
+            seen.setdefault(_rows(s.index)[0], s.data)
+        return jax.numpy.concatenate([seen[k] for k in sorted(seen)], axis=0)
+
+    return jax.tree.map(part, model)
