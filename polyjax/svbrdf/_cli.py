@@ -45,6 +45,7 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
 def run_svbrdf(args) -> int:
     from . import _distributed
 
+    light = _floats(args.new_light, 3, "--new-light")  # argument errors before any work
     _distributed.initialize(args.coordinator, args.num_processes, args.process_id)  # before any JAX computation
     import jax
     import jax.numpy as jnp
@@ -58,7 +59,6 @@ def run_svbrdf(args) -> int:
     root = getattr(args, "data_root", None)
     names = [n.strip() for n in args.materials.split(",") if n.strip()]
     materials = [pj.data.load_nbrdf(n, root=root) for n in names]
-    light = _floats(args.new_light, 3, "--new-light")
     held = {}
 
     def load_rows(start, stop):

@@ -113,14 +113,15 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
 
 
 def local_part(model: PolynomialBRDF) -> PolynomialBRDF:
-    """The rows of a row-sharded ``model`` held by this process, as an ordinary (local) model."""
+    """The rows of a row-sharded ``model`` held by this process, as an ordinary unsharded model on this process's
+    default device (for per-process work such as re-rendering its rows; the other processes' rows are not read)."""
     def part(a):
         shards = getattr(a, "addressable_shards", None)
-        if not shards or getattr(a, "is_fully_addressable", True):
+        if not shards:
             return a
         seen = {}
         for s in shards:
-            seen.setdefault(_rows(s.index)[0], s.data)
-        return jax.numpy.concatenate([seen[k] for k in sorted(seen)], axis=0)
+            seen.setdefault(_rows(s.index)[0], np.asarray(s.data))
+        return jax.numpy.asarray(np.concatenate([seen[k] for k in sorted(seen)], axis=0))
 
     return jax.tree.map(part, model)
