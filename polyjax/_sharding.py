@@ -5,8 +5,8 @@ A fit's lanes (materials, channels, texels) are independent, so a batch sharded 
 than handed to the partitioner: the per-lane path loops over blocks of lanes (:func:`jax.lax.map`) and maps its
 factorisations one matrix at a time (``custom_vmap`` in :mod:`polyjax._linalg`), and neither partitions along
 the mapped axis. With ``Explicit`` mesh axes (the default of :func:`jax.make_mesh`) ``vmap`` refuses a batch
-sharded differently from the replicated design ("Mapped away dimension ... should be sharded the same"); with
-``Auto`` axes the partitioner would have to gather the loop's input onto every device. Under ``shard_map`` every
+sharded differently from the replicated design ("Mapped away dimension ... should be sharded the same"); inputs
+on a mesh with ``Auto`` axes take the same path. Under ``shard_map`` every
 device runs the unsharded program on its own block of lanes, so the numbers are those of an unsharded fit.
 
 Rule: only the leading batch axis of ``values`` (and of per-lane ``u``, ``v``, ``weights``, ``mask``) may be
