@@ -294,6 +294,7 @@ def test_mitsuba_sphere_matches_polyjax_render():
     (8 x 8 supersampled pixel centres, averaged). The mirrored image must not match (the check can fail)."""
     mi = _mitsuba("llvm_ad_rgb")
     import polyjax.render as pr
+
     from _render_problems import LIGHT_DIR, ortho_camera
 
     model = MODELS["lafortune"]
