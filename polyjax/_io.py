@@ -16,6 +16,7 @@ FORMAT = "polyjax.PolynomialBRDF"
 VERSION = 1
 _ARRAYS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used", "status")
 _STATIC = ("variables", "basis", "interactions", "max_degree")
+_OPTIONAL = {"link": "identity", "eps": 0.0}  # log-space models (polyjax._logfit); absent in older files
 
 
 def save_model(path: str | os.PathLike, model: PolynomialBRDF) -> Path:
@@ -24,7 +25,7 @@ def save_model(path: str | os.PathLike, model: PolynomialBRDF) -> Path:
     The variable set is stored by name: a user-registered set must be registered again before loading.
     """
     path = Path(path)
-    meta = {"format": FORMAT, "version": VERSION, **{k: getattr(model, k) for k in _STATIC}}
+    meta = {"format": FORMAT, "version": VERSION, **{k: getattr(model, k) for k in _STATIC + tuple(_OPTIONAL)}}
     arrays = {k: np.asarray(getattr(model, k)) for k in _ARRAYS}
     if path.suffix == ".json":
         doc = dict(meta)
@@ -67,5 +68,6 @@ def load_model(path: str | os.PathLike) -> PolynomialBRDF:
     if missing:
         raise DataFormatError(path, f"arrays {list(_ARRAYS)}", f"missing {missing}")
     return PolynomialBRDF(
-        **{k: jnp.asarray(arrays[k]) for k in _ARRAYS}, **{k: meta[k] for k in _STATIC}
+        **{k: jnp.asarray(arrays[k]) for k in _ARRAYS}, **{k: meta[k] for k in _STATIC},
+        **{k: type(d)(meta.get(k, d)) for k, d in _OPTIONAL.items()},
     )
