@@ -16,6 +16,7 @@ from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, P
 from ._fit import fit_polynomial, n_parameters
 from ._geometry import cartesian_to_spherical, cos_theta, cutoff_mask, half_vector, reflect, safe_normalize, spherical_to_cartesian
 from ._io import load_model, save_model
+from ._logfit import fit_log_polynomial
 from ._lstsq import LstsqSolution, weighted_lstsq
 from ._measurements import Measurements, check_samples, make_measurements
 from ._metrics import fit_weights, l2_error, psnr
@@ -29,7 +30,7 @@ __all__ = [
     "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
     "LstsqSolution", "Measurements", "PCA", "PolyjaxError", "PolynomialBRDF", "UnknownNameError", "VariableSet",
     "approximation_error", "cartesian_to_spherical", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_pca", "fit_polynomial", "fit_weights",
+    "evaluate_paper_form", "explanatory_variables", "exponents", "fit_log_polynomial", "fit_pca", "fit_polynomial", "fit_weights",
     "get_variables", "half_vector", "has_data_root", "l2_error", "load_model", "make_measurements", "n_parameters",
     "n_terms", "psnr", "reflect", "register_variables", "safe_normalize", "save_model", "spherical_to_cartesian",
     "variable_sets", "weighted_lstsq",

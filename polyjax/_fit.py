@@ -150,6 +150,9 @@ def fit_polynomial(
     rcond: float | None = None,
     rank_deficient: str = "flag",
     nonfinite: str = "error",
+    link: str = "identity",
+    eps: float = 1e-3,
+    steps: int = 3,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
 
@@ -184,11 +187,22 @@ def fit_polynomial(
         nonfinite: ``"error"`` (raise on NaN/inf in ``values``; under an outer ``jit``, where nothing can be
            raised, such a lane is flagged ``NONFINITE_VALUES`` with or without ``mask``) or ``"mask"``
            (drop those samples).
+        link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
+           weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
+           is equation (3) itself.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
         degree axis when ``degree`` is a sequence).
     """
+    if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_logfit.py
+        if link != "log" or nonfinite != "error":
+            raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
+        from ._logfit import fit_log_polynomial
+
+        return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
+                                  cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
+                                  rcond=rcond, rank_deficient=rank_deficient)
     if isinstance(u, Measurements):
         data = u
         if values is not None or (v is not None and not isinstance(v, str)):
