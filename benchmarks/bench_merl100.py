@@ -55,7 +55,7 @@ def log_metric(b, f, u, v, w, cutoff_deg=80.0):
     keep = pj.cutoff_mask(u, v, cutoff_deg)
     cu = jnp.where(keep, u[:, 2], 0.0)
     ww = jnp.where(keep, w, 0.0)
-    r = jnp.log1p(jnp.maximum(f, 0.0) * cu) - jnp.log1p(jnp.maximum(b, 0.0) * cu)
+    r = jnp.where(keep, jnp.log1p(jnp.maximum(f, 0.0) * cu) - jnp.log1p(jnp.maximum(b, 0.0) * cu), 0.0)
     return jnp.sqrt(jnp.sum(ww * r * r, -1) / jnp.sum(ww))
 
 
@@ -119,7 +119,10 @@ def main():
     ap.add_argument("--fit-bins", type=int, default=5000)
     ap.add_argument("--chunk", type=int, default=20, help="materials per batched nonlinear fit")
     ap.add_argument("--out", default="merl100_out")
+    ap.add_argument("--replot", action="store_true", help="only redraw merl100.png from --out/merl100.csv")
     args = ap.parse_args()
+    if args.replot:
+        return replot(Path(args.out))
     t_all = time.perf_counter()
     names = list(pj.data.MERL_NAMES[: args.materials])
     d = pj.data.load_merl_nbrdf(names, subsample=args.eval_bins, seed=0)
@@ -179,6 +182,16 @@ def main():
     plot(names, l2, best, out / "merl100.png")
 
 
+def replot(out):
+    import csv
+
+    with open(out / "merl100.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    names = [r["material"] for r in rows]
+    l2 = {k[3:]: np.array([float(r[k]) for r in rows]) for k in rows[0] if k.startswith("l2 ")}
+    plot(names, l2, np.minimum(l2["published sgd"], l2["published abc"]), out / "merl100.png")
+
+
 def plot(names, l2, best, path):
     import matplotlib
 
@@ -187,8 +200,13 @@ def plot(names, l2, best, path):
 
     order = np.argsort(l2["published sgd"] / best + l2["published abc"] / best)
     fig, ax = plt.subplots(figsize=(16, 6))
-    for k in l2:
-        ax.plot(np.arange(len(names)), (l2[k] / best)[order], marker="o", ms=3, lw=0.8, label=k)
+    colours = plt.get_cmap("tab20").colors
+    for j, k in enumerate(l2):
+        style = dict(color="k", ls="--", marker="x") if k.startswith("published") else dict(color=colours[2 * j % 20])
+        style.setdefault("marker", "os^vD<>p*h"[j % 10])
+        if k == "published abc":
+            style.update(color="0.5")
+        ax.plot(np.arange(len(names)), (l2[k] / best)[order], ms=3, lw=0.8, label=k, **style)
     ax.axhline(1.0, color="k", lw=0.8)
     ax.axhline(1.1, color="k", lw=0.5, ls="--")
     ax.set_yscale("log")
