@@ -120,8 +120,8 @@ def fit_log_polynomial(
     v = jnp.asarray(v, values.dtype)
     w = jnp.ones(values.shape[-1:], values.dtype) if weights is None else jnp.asarray(weights, values.dtype)
     w = jnp.broadcast_to(w, values.shape)
-    opts = dict(variables=variables, degree=int(degree), mask=mask, cutoff_deg=cutoff_deg, basis=basis,
-                interactions=interactions, method=method, rcond=rcond, rank_deficient=rank_deficient)
+    opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
+            "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
 
     keep = fit_weights(u, v, w, mask, cutoff_deg)[0] > 0  # the fitted samples; the model may overflow elsewhere
 

@@ -38,7 +38,7 @@ def test_rusinkiewicz_gradients_finite_at_theta_zero(variables):
     pairs = [(z, z), (a, a), (a, a * jnp.array([-1.0, -1.0, 1.0]))]
     for u, v in pairs:
         ju, jv = jax.jacfwd(lambda p, q: pj.explanatory_variables(variables, p, q), argnums=(0, 1))(u, v)
-        gu = jax.jacrev(lambda p: pj.explanatory_variables(variables, p, v))(u)
+        gu = jax.jacrev(lambda p, q=v: pj.explanatory_variables(variables, p, q))(u)
         assert np.all(np.isfinite(np.asarray(ju))) and np.all(np.isfinite(np.asarray(jv)))
         assert np.all(np.isfinite(np.asarray(gu)))
 

@@ -24,7 +24,7 @@ def _np_frame(i, o):
 def np_sgd(row, i, o):
     """SGD with the 11 published parameters of one channel: rhoD, rhoS, alpha, p, f0, f1, kap, lambda, c, k, theta0."""
     rho_d, rho_s, alpha, p, f0, f1, kap, lam, c, k, theta0 = row
-    h, cos_h, cos_d = _np_frame(i, o)
+    _, cos_h, cos_d = _np_frame(i, o)
     t2 = (1 - cos_h**2) / cos_h**2
     a = alpha + t2 / alpha
     d = kap * np.exp(-a) / (np.pi * a**p * cos_h**4)
