@@ -27,6 +27,7 @@ from ._geometry import (
 from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._io import load_model, save_model
 from ._kinds import ModelKind, model_kinds, register_model_kind
+from ._logfit import fit_log_polynomial
 from ._lstsq import LstsqSolution, weighted_lstsq
 from ._measurements import Measurements, check_samples, make_measurements
 from ._metrics import fit_weights, l2_error, psnr
@@ -42,9 +43,9 @@ __all__ = [
     "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs",
     "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error", "cartesian_to_spherical",
     "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "export", "exponents", "fit_pca", "fit_polynomial",
-    "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
-    "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
-    "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
-    "safe_normalize", "save_model", "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
+    "evaluate_paper_form", "explanatory_variables", "export", "exponents", "fit_log_polynomial", "fit_pca",
+    "fit_polynomial", "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector",
+    "has_data_root", "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters",
+    "n_terms", "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables",
+    "render", "safe_normalize", "save_model", "spherical_to_cartesian", "variable_sets", "weighted_lstsq",
 ]

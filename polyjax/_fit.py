@@ -110,6 +110,9 @@ def fit_polynomial(
     rank_deficient: str = "flag",
     nonfinite: str = "error",
     throw: bool = False,
+    link: str = "identity",
+    eps: float = 1e-3,
+    steps: int = 3,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
 
@@ -149,11 +152,22 @@ def fit_polynomial(
            (rank-deficient, no samples, non-finite values or L2); under ``jit`` an
            :func:`equinox.error_if` error with that code's message. Lanes with no samples are always
            ``NO_SAMPLES`` (L2 = inf); a lane whose L2 overflows is ``NONFINITE``.
+        link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
+           weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
+           is equation (3) itself.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
         degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.Result` codes.
     """
+    if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_logfit.py
+        if link != "log" or nonfinite != "error":
+            raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
+        from ._logfit import fit_log_polynomial
+
+        return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
+                                  cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
+                                  rcond=rcond, rank_deficient=rank_deficient)
     if isinstance(u, Measurements) and isinstance(v, str):
         u, v, variables = u, None, v
     vs = get_variables(variables)

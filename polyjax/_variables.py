@@ -10,7 +10,19 @@ name                        variables                                  k     rec
 ``ashikhmin-shirley``       n.h, v.h, max(n.u, n.v)         (eq. 9)    3     yes
 ``lafortune``               ux vx + uy vy, uz vz             (sec 3.3)  2     yes
 ``lafortune-anisotropic``   ux vx, uy vy, uz vz              (eq. 10)   3     yes
+``rusinkiewicz``            theta_h, theta_d                           2     yes
+``rusinkiewicz-phid``       theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  3  yes
 ==========================  =========================================  ====  ==========
+
+The Rusinkiewicz half/difference angles (Rusinkiewicz 1998) are the coordinates measured BRDFs
+(MERL) are tabulated in: ``theta_h`` the polar angle of ``h``, ``theta_d`` the angle between ``u``
+and ``h``, ``phi_d`` the azimuth of ``u`` about ``h`` in the frame where ``phi_h = 0``. Swapping
+``u`` and ``v`` sends ``phi_d`` to ``phi_d + pi``, so ``phi_d`` enters as
+``sin^2(theta_d) cos(2 phi_d) = d_x^2 - d_y^2``: reciprocal, even in ``phi_d`` (isotropic), smooth
+where ``phi_d`` is undefined (``theta_d = 0``). The three variables describe every isotropic BRDF;
+an anisotropic one would also need ``phi_h``. Angles are computed as ``atan2`` of a guarded norm
+and a cosine (never ``arccos``), so values and gradients stay finite at ``theta = 0``; at
+``theta_h = 0`` (``h = n``, ``phi_h`` undefined) ``phi_h = 0`` is used.
 
 ``h = (u + v)/|u + v|`` is the half vector; ``v.h = u.h``, so every built-in set is symmetric
 in ``u`` and ``v`` and the fitted model is reciprocal. Users can add their own set with
@@ -70,6 +82,38 @@ def _lafortune(u, v):
 
 def _lafortune_anisotropic(u, v):
     return u * v
+
+
+def _safe_norm(a):
+    """``|a|`` over the last axis with a finite (zero) gradient at ``a = 0``."""
+    r2 = jnp.sum(a * a, axis=-1)
+    pos = r2 > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, r2, 1.0)), 0.0)
+
+
+def _half_difference(u, v):
+    """``theta_h``, ``theta_d`` and the difference vector ``d`` (``u`` in the frame of ``h`` with ``phi_h = 0``)."""
+    h = half_vector(u, v)
+    rh = _safe_norm(h[..., :2])
+    theta_h = jnp.arctan2(rh, h[..., 2])
+    theta_d = jnp.arctan2(_safe_norm(jnp.cross(u, h)), jnp.sum(u * h, axis=-1))
+    pole = rh <= 0
+    rs = jnp.where(pole, 1.0, rh)
+    cos_p, sin_p = jnp.where(pole, 1.0, h[..., 0] / rs), jnp.where(pole, 0.0, h[..., 1] / rs)
+    x = cos_p * u[..., 0] + sin_p * u[..., 1]  # d = R_y(-theta_h) R_z(-phi_h) u
+    y = -sin_p * u[..., 0] + cos_p * u[..., 1]
+    dx = x * h[..., 2] - u[..., 2] * rh
+    return theta_h, theta_d, dx, y
+
+
+def _rusinkiewicz(u, v):
+    theta_h, theta_d, _, _ = _half_difference(u, v)
+    return jnp.stack([theta_h, theta_d], axis=-1)
+
+
+def _rusinkiewicz_phid(u, v):
+    theta_h, theta_d, dx, dy = _half_difference(u, v)
+    return jnp.stack([theta_h, theta_d, dx * dx - dy * dy], axis=-1)
 
 
 _REGISTRY: dict[str, VariableSet] = {}
@@ -144,4 +188,9 @@ register_variables(
 register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]")
 register_variables(
     "lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True, description="ux vx, uy vy, uz vz  [paper eq. (10)]"
+)
+register_variables("rusinkiewicz", _rusinkiewicz, 2, symmetric=True, description="theta_h, theta_d  [Rusinkiewicz 1998]")
+register_variables(
+    "rusinkiewicz-phid", _rusinkiewicz_phid, 3, symmetric=True,
+    description="theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  [Rusinkiewicz 1998]",
 )
