@@ -142,7 +142,8 @@ def main():
     best_lg = np.minimum(lg["published sgd"], lg["published abc"])
     t_sgd = times["fit sgd"][0]
     lines = [f"{len(names)} MERL materials (neural fits), L2 of equation (11) on {d.u.shape[0]} bins (seed 0), "
-             f"mean over R, G, B; nonlinear fits on {dfit.u.shape[0]} other bins (seed 1), 16 starts. Ratio = model L2 / "
+             f"mean over R, G, B; nonlinear fits on {dfit.u.shape[0]} other bins (seed 1), 16 starts. "
+              "Ratio = model L2 / "
              "best of published SGD and ABC for that material. Parameters per channel (ABC published: kD, A per "
              "channel, B, C, ior shared: 9 per material).", "",
              "| model | params / channel | median ratio | within 1.1x | beats | worse than 2x | 10th-90th pct | "
@@ -155,7 +156,8 @@ def main():
         t = times.get(k, (None,))[0]
         tt = "published" if t is None else f"{t:.3f}"
         sp = "" if t is None else f"{t_sgd / t:.1f}x"
-        lines.append(f"| {k} | {n_par[k]} | {np.median(r):.2f} | {int(np.sum(r <= 1.1))} of {n} | {int(np.sum(r < 1))} | "
+        lines.append(f"| {k} | {n_par[k]} | {np.median(r):.2f} | {int(np.sum(r <= 1.1))} of {n} | "
+                     f"{int(np.sum(r < 1))} | "
                      f"{int(np.sum(r > 2))} | {np.percentile(r, 10):.2f}-{np.percentile(r, 90):.2f} | "
                      f"{np.median(rl):.2f} | {int(np.sum(rl < 1))} | {tt} | {sp} |")
     rows = [m for m in ISSUE_ROWS if m in names]
@@ -177,7 +179,8 @@ def main():
         keys = list(l2)
         fh.write("material," + ",".join(f"l2 {k}" for k in keys) + "," + ",".join(f"log {k}" for k in keys) + "\n")
         for i, m in enumerate(names):
-            fh.write(m + "," + ",".join(f"{l2[k][i]:.6g}" for k in keys) + "," + ",".join(f"{lg[k][i]:.6g}" for k in keys)
+            fh.write(m + "," + ",".join(f"{l2[k][i]:.6g}" for k in keys) + ","
+                     + ",".join(f"{lg[k][i]:.6g}" for k in keys)
                      + "\n")
     plot(names, l2, best, out / "merl100.png")
 

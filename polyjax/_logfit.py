@@ -115,7 +115,8 @@ def fit_log_polynomial(
     if not isinstance(values, jax.core.Tracer):
         finite = np.isfinite(np.asarray(values)) | (False if mask is None else ~np.asarray(mask, bool))
         if not finite.all():
-            raise InputError(f"values: expected finite numbers where mask is True, found {int((~finite).sum())} NaN/inf")
+            raise InputError(
+                f"values: expected finite numbers where mask is True, found {int((~finite).sum())} NaN/inf")
     u = jnp.asarray(u, values.dtype)
     v = jnp.asarray(v, values.dtype)
     w = jnp.ones(values.shape[-1:], values.dtype) if weights is None else jnp.asarray(weights, values.dtype)

@@ -44,7 +44,8 @@ def np_abc(kd, a_, b, c, ior, i, o):
     g = np.minimum(np.minimum(1, 2 * cos_h * i[..., 2] / np.sum(h * i, -1)),
                    np.minimum(1, 2 * cos_h * o[..., 2] / np.sum(h * o, -1)))
     gg = np.sqrt(ior**2 + cos_d**2 - 1)
-    fr = 0.5 * ((gg - cos_d) ** 2 / (gg + cos_d) ** 2) * (1 + (cos_d * (gg + cos_d) - 1) ** 2 / (cos_d * (gg - cos_d) + 1) ** 2)
+    fr = 0.5 * ((gg - cos_d) ** 2 / (gg + cos_d) ** 2) * (
+        1 + (cos_d * (gg + cos_d) - 1) ** 2 / (cos_d * (gg - cos_d) + 1) ** 2)
     val = kd / np.pi + fr * d * g / (np.pi * i[..., 2] * o[..., 2])
     return np.where((i[..., 2] > 0) & (o[..., 2] > 0), val, 0.0)
 
@@ -86,7 +87,8 @@ def test_sgd_published_matches_the_source_formulas(data_root):
     for m, r in enumerate(rows):
         for c, ch in enumerate("rgb"):
             # extended precision: acos near 1 and x^k with k ~ 800 amplify float64 rounding of the reference
-            want = np_sgd([np.longdouble(r[f"{k}_{ch}"]) for k in cols], u.astype(np.longdouble), v.astype(np.longdouble))
+            want = np_sgd([np.longdouble(r[f"{k}_{ch}"]) for k in cols], u.astype(np.longdouble),
+                          v.astype(np.longdouble))
             worst = max(worst, _rel(got[m, c], want))
     assert worst < 1e-10, worst
     assert np.all(np.isfinite(got)) and np.any(got > 1.0)  # glossy peaks are in the sample
@@ -103,7 +105,8 @@ def test_abc_published_matches_the_source_formulas(data_root):
     worst = 0.0
     for m, r in enumerate(rows):
         for c, ch in enumerate("rgb"):
-            want = np_abc(float(r[f"kD_{ch}"]), float(r[f"A_{ch}"]), float(r["B"]), float(r["C"]), float(r["ior"]), u, v)
+            want = np_abc(float(r[f"kD_{ch}"]), float(r[f"A_{ch}"]), float(r["B"]), float(r["C"]), float(r["ior"]),
+                          u, v)
             worst = max(worst, _rel(got[m, c], want))
     assert worst < 1e-10, worst
     np.testing.assert_array_equal(bl.published("abc", "gold-metallic-paint"),
