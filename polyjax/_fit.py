@@ -23,10 +23,13 @@ from ._variables import get_variables
 
 
 @functools.partial(
-    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg"),
+    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg",
+                              "batch", "scalar"),
 )
-def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg):
-    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays."""
+def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
+                batch, scalar):
+    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
+    (``(*batch, ...)`` when ``scalar``)."""
     u, v, values = inp.u, inp.v, inp.values
     x = get_variables(variables).fn(u, v)
     k = x.shape[-1]
@@ -72,12 +75,14 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
-    return dict(
+    out = dict(
         coefficients=coef.astype(values.dtype),
         degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
         mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
         n_used=n_used.astype(jnp.int32), status=status,
     )
+    lead = () if scalar else (n_deg,)  # (D, B, ...) -> (D?, *batch, ...) inside the program: no eager reshapes
+    return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
 
 
 def _check_options(basis, method, rank_deficient, degree):
@@ -164,11 +169,10 @@ def fit_polynomial(
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
-    out = _fit_kernel(inp, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff)
     scalar = np.ndim(degree) == 0
-    lead = () if scalar else (degrees.size,)
-    out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
+    out = _fit_kernel(inp, np.asarray(degrees, np.int32), variables=vs.name, max_degree=max_degree, basis=basis,
+                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
+                      batch=inp.batch, scalar=scalar)
     model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
                            max_degree=max_degree)
     if throw or rank_deficient == "error":
