@@ -77,11 +77,34 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     return folder
 
 
-class compile_notice:
-    """Context manager: one line on stderr when the block runs longer than ``delay`` seconds.
+_counts = {"requests": 0, "answered": 0}
+_listening = False
 
-    The command line wraps its first fit in it, so that the seconds JAX spends compiling a program for new
-    shapes are not silence. The line is printed at most once per process.
+
+def _listen() -> None:
+    """Count the persistent cache's look-ups and their outcomes (a hit, or a compiled program written)."""
+    global _listening
+    if _listening:
+        return
+    import jax.monitoring
+
+    def on_event(event: str, **_) -> None:
+        if event == "/jax/compilation_cache/compile_requests_use_cache":
+            _counts["requests"] += 1
+        elif event in ("/jax/compilation_cache/cache_hits", "/jax/compilation_cache/cache_misses"):
+            _counts["answered"] += 1
+
+    jax.monitoring.register_event_listener(on_event)
+    _listening = True
+
+
+class compile_notice:
+    """Context manager: one line on stderr when the block is still compiling after ``delay`` seconds.
+
+    The command line wraps its fits in it, so that the seconds JAX spends compiling a program for new shapes are
+    not silence. With the cache on, the line appears only while a program that the cache did not hold is being
+    compiled (a warm run that is merely slow stays quiet); with the cache off, whenever the block takes longer than
+    ``delay`` (default 1 s, ``$POLYJAX_COMPILE_NOTICE_SECS``). At most one line per process.
     """
 
     printed = False
@@ -90,11 +113,23 @@ class compile_notice:
         self.what, self.cache = what, cache
         self.delay = float(os.environ.get("POLYJAX_COMPILE_NOTICE_SECS", 1.0)) if delay is None else float(delay)
         self.stream = stream
-        self._timer: threading.Timer | None = None
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _compiling(self) -> bool:
+        return self.cache is None or _counts["requests"] > _counts["answered"]
+
+    def _watch(self) -> None:
+        if self._done.wait(self.delay):
+            return
+        while not compile_notice.printed:
+            if self._compiling():
+                self._say()
+                return
+            if self._done.wait(0.1):
+                return
 
     def _say(self) -> None:
-        if compile_notice.printed:
-            return
         compile_notice.printed = True
         where = (f"kept in {self.cache} for later runs" if self.cache is not None
                  else "the compilation cache is off, so every process compiles again")
@@ -104,12 +139,14 @@ class compile_notice:
 
     def __enter__(self):
         if not compile_notice.printed:
-            self._timer = threading.Timer(self.delay, self._say)
-            self._timer.daemon = True
-            self._timer.start()
+            if self.cache is not None:
+                _listen()
+            self._thread = threading.Thread(target=self._watch, daemon=True)
+            self._thread.start()
         return self
 
     def __exit__(self, *exc):
-        if self._timer is not None:
-            self._timer.cancel()
+        self._done.set()
+        if self._thread is not None:
+            self._thread.join()
         return False
