@@ -13,23 +13,24 @@ from jaxtyping import ArrayLike
 from ._basis import BASES, n_terms, term_degrees
 from ._design import fitted_design
 from ._errors import InputError
-from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
+from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._lstsq import METHODS, weighted_lstsq
 from ._measurements import Measurements
 from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
+from ._stream import streamed_lane, use_stream
 from ._variables import get_variables
 
 
 @functools.partial(
     jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg",
-                              "batch", "scalar"),
+                              "batch", "scalar", "stream"),
 )
 def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
-                batch, scalar):
+                batch, scalar, stream=False):
     """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
-    (``(*batch, ...)`` when ``scalar``)."""
+    (``(*batch, ...)`` when ``scalar``); ``stream``: the shared design is streamed (:mod:`polyjax._stream`)."""
     u, v, values = inp.u, inp.v, inp.values
     x = get_variables(variables).fn(u, v)
     k = x.shape[-1]
@@ -55,8 +56,14 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
         return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
-    if inp.shared:  # one design, one factorisation, nb right-hand sides
+    if inp.shared and stream:  # the same, the design built block by block and never held
+        tr, coef, l2, rank, cond, n_act, n_used = streamed_lane(
+            x, values, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions,
+            rcond=rcond, dense=lambda: lane(values, w[0], wc2[0]),
+        )
+    if inp.shared and not stream:  # one design, one factorisation, nb right-hand sides
         tr, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+    if inp.shared:
         tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
@@ -170,9 +177,11 @@ def fit_polynomial(
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
     scalar = np.ndim(degree) == 0
+    stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
+                        is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
     out = _fit_kernel(inp, np.asarray(degrees, np.int32), variables=vs.name, max_degree=max_degree, basis=basis,
                       interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
-                      batch=inp.batch, scalar=scalar)
+                      batch=inp.batch, scalar=scalar, stream=stream)
     model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
                            max_degree=max_degree)
     if throw or rank_deficient == "error":
