@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Sequence
 
 import jax
@@ -19,7 +20,7 @@ from ._measurements import Measurements
 from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
-from ._stream import streamed_lane, use_stream
+from ._stream import stream_geometry, streamed_lane, use_stream
 from ._variables import get_variables
 
 
@@ -28,13 +29,18 @@ from ._variables import get_variables
                               "batch", "scalar", "stream"),
 )
 def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
-                batch, scalar, stream=False):
+                batch, scalar, stream=False, geometry=None):
     """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
-    (``(*batch, ...)`` when ``scalar``); ``stream``: the shared design is streamed (:mod:`polyjax._stream`)."""
+    (``(*batch, ...)`` when ``scalar``); ``stream``: the shared design is streamed (:mod:`polyjax._stream`),
+    from ``geometry`` (:func:`_geometry_kernel`) when given."""
     u, v, values = inp.u, inp.v, inp.values
-    x = get_variables(variables).fn(u, v)
-    k = x.shape[-1]
-    w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+    k = get_variables(variables).k
+
+    def samples():  # computed where used: a streamed fit from a given geometry never needs them
+        x = get_variables(variables).fn(u, v)
+        w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+        return x, w, wc2
+
     tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
     n_deg, nb = degrees.shape[0], values.shape[0]
@@ -47,7 +53,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
         return jnp.where(den > 0, l2, jnp.inf)
 
-    def lane(y, wl, wc2l):
+    def lane(y, wl, wc2l, x):
         """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
         keep = wl > 0
         pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
@@ -56,19 +62,26 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
         return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
+    def dense_shared():
+        x, w, wc2 = samples()
+        return lane(values, w[0], wc2[0], x)
+
     if inp.shared and stream:  # the same, the design built block by block and never held
+        geo = _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg) if geometry is None \
+            else geometry
         tr, coef, l2, rank, cond, n_act, n_used = streamed_lane(
-            x, values, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions,
-            rcond=rcond, dense=lambda: lane(values, w[0], wc2[0]),
+            geo, values, active, max_degree=max_degree, basis=basis, interactions=interactions, rcond=rcond,
+            dense=dense_shared,
         )
     if inp.shared and not stream:  # one design, one factorisation, nb right-hand sides
-        tr, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+        tr, coef, l2, rank, cond, n_act, n_used = dense_shared()
     if inp.shared:
         tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
     else:
-        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))
+        x, w, wc2 = samples()
+        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l, x))
         tr, coef, l2, rank, cond, n_act, n_used = per_lane(values, w, wc2)
         coef, l2 = jnp.swapaxes(coef[:, :, 0], 0, 1), jnp.swapaxes(l2[:, :, 0], 0, 1)  # lane axis after degrees
         rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
@@ -90,6 +103,41 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     )
     lead = () if scalar else (n_deg,)  # (D, B, ...) -> (D?, *batch, ...) inside the program: no eager reshapes
     return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
+
+
+def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
+    x = get_variables(variables).fn(inp.u, inp.v)
+    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
+    return stream_geometry(x, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions)
+
+
+@functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))
+def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions, cutoff_deg):
+    """The values-independent half of a streamed fit (:func:`polyjax._stream.stream_geometry`), compiled alone."""
+    k = get_variables(variables).k
+    active = jnp.asarray(term_degrees(k, max_degree, interactions))[None, :] <= degrees[:, None]
+    return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
+
+
+_GEOMETRY_MEMO: dict = {}
+
+
+def _streamed_geometry(inp, degrees, **static):
+    """The geometry of a streamed fit, remembered for the next fit on the same samples (the same direction arrays
+    by identity, equal weights and mask, the same options): one entry, the last one."""
+    key = (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
+    hit = _GEOMETRY_MEMO.get("last")
+    w, m = np.asarray(inp.weights), np.asarray(inp.mask)
+    if (hit is not None and hit["key"] == key and hit["u"]() is inp.u and hit["v"]() is inp.v
+            and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
+        return hit["geo"]
+    geo = _geometry_kernel(inp, np.asarray(degrees, np.int32), **static)
+    try:
+        _GEOMETRY_MEMO["last"] = dict(key=key, u=weakref.ref(inp.u), v=weakref.ref(inp.v), w=w.copy(), m=m.copy(),
+                                      geo=geo)
+    except TypeError:  # arrays without weak references: not remembered
+        _GEOMETRY_MEMO.pop("last", None)
+    return geo
 
 
 def _check_options(basis, method, rank_deficient, degree):
@@ -179,9 +227,11 @@ def fit_polynomial(
     scalar = np.ndim(degree) == 0
     stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
                         is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
-    out = _fit_kernel(inp, np.asarray(degrees, np.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
-                      batch=inp.batch, scalar=scalar, stream=stream)
+    static = dict(variables=vs.name, max_degree=max_degree, basis=basis, interactions=bool(interactions),
+                  cutoff_deg=cutoff)
+    geometry = _streamed_geometry(inp, degrees, **static) if stream else None
+    out = _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch, scalar=scalar,
+                      stream=stream, geometry=geometry, **static)
     model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
                            max_degree=max_degree)
     if throw or rank_deficient == "error":

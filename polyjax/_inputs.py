@@ -24,6 +24,7 @@ inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the ho
 from __future__ import annotations
 
 import functools
+import weakref
 
 import equinox as eqx
 import jax
@@ -149,18 +150,43 @@ def _lane_array(name, a, n, batch, dtype):
     raise _lane_shape_error(name, a.shape, n, batch)
 
 
+@jax.jit
+def _normalize_pair(u, v):
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    return u, v, ok_u & ok_v
+
+
+_UNIT_MEMO: dict = {}
+
+
+def _unit_directions(u, v):
+    """Unit ``u``, ``v`` and where both have a direction. The last concrete pair is remembered by identity: the
+    loaders hand out the same device arrays for a shared grid (every MERL ``.binary`` file), whose million
+    directions are then normalised once, not once per fit."""
+    if not is_concrete(u, v):
+        return _normalize_pair(u, v)
+    hit = _UNIT_MEMO.get("pair")
+    if hit is not None and hit[0]() is u and hit[1]() is v:
+        return hit[2]
+    out = _normalize_pair(u, v)
+    try:
+        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), out)
+    except TypeError:  # an array type without weak references: not remembered
+        _UNIT_MEMO.pop("pair", None)
+    return out
+
+
 @functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))
-def _prepare_core(u, v, values, w, m, *, nonfinite, shared):
-    """The array work of :func:`prepare_inputs`: normalised directions, masks, flags for the concrete checks."""
+def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
+    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks."""
     n = values.shape[-1]
     y = values.reshape(-1, n)
     nb = y.shape[0]
     w = jnp.ones((1, n), y.dtype) if w is None else w.reshape(-1, n)
     m = jnp.ones((1, n), bool) if m is None else m.reshape(-1, n)
     w_bad = ~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
-    m = m & (ok_u & ok_v)[None]
+    m = m & ok[None]
     finite = jnp.isfinite(y)
     bad = m & ~finite  # (B, n)
     any_bad = jnp.any(bad)
@@ -205,7 +231,9 @@ def prepare_inputs(
     shared = (w is None or w.ndim == 1) and (m is None or m.ndim == 1) and (nonfinite == "error" or nb == 1)
     # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
     # in every process: most of a warm `polyjax fit`)
-    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, values, w, m, nonfinite=nonfinite, shared=shared)
+    u, v, ok = _unit_directions(u, v)
+    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, ok, values, w, m, nonfinite=nonfinite,
+                                                            shared=shared)
     if is_concrete(w_bad) and bool(w_bad):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
     if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):

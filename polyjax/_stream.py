@@ -18,6 +18,10 @@ passes 2 and 3 also the values. Every degree of a batched fit shares pass 1 (col
 When a Cholesky factor fails (a rank-deficient or badly conditioned design), the fit is done by the dense path
 instead, inside the same program, as :func:`~polyjax._linalg.tall_qr` falls back to Householder QR.
 
+Pass 1 and ``R_1`` depend on the directions and weights only, not on the values: :func:`stream_geometry`
+computes them in a program of their own, which :func:`polyjax.fit_polynomial` keeps for the next fit on the same
+samples (every MERL material shares the grid of directions, so a second material pays for passes 2 and 3 only).
+
 Not differentiable: the loops have no derivative rule. :func:`polyjax.fit_polynomial` takes this path only for
 concrete inputs (a call outside ``jit``/``grad``/``vmap``); traced inputs take the dense, differentiable path.
 """
@@ -69,19 +73,19 @@ def _chol_upper(g):
     return r, jnp.all(jnp.isfinite(r)) & jnp.all(jnp.diagonal(r) > 0)
 
 
-def streamed_lane(x, y, wl, wc2l, active, *, max_degree, basis, interactions, rcond, dense, block=None):
-    """The shared-design fit of every right-hand side of ``y`` for every degree, streamed.
+def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, block=None):
+    """What a streamed fit needs of the samples alone (not of the values): pass 1 and ``R_1``.
 
     Args:
-        x: ``(n, k)`` explanatory variables; ``y``: ``(r, n)`` values; ``wl``, ``wc2l``: ``(n,)`` the weights
-            ``w`` and ``w cos^2 theta_u`` (0 for dropped samples); ``active``: ``(D, m)`` columns per degree.
-        max_degree, basis, interactions, rcond: as in :func:`polyjax.fit_polynomial`.
-        dense: ``() -> outputs``, the dense fit, run instead when a Cholesky factor fails.
+        x: ``(n, k)`` explanatory variables; ``wl``, ``wc2l``: ``(n,)`` the weights ``w`` and ``w cos^2 theta_u``
+            (0 for dropped samples); ``active``: ``(D, m)`` columns per degree.
+        max_degree, basis, interactions: as in :func:`polyjax.fit_polynomial`.
         block: rows per block (default :data:`BLOCK`).
 
     Returns:
-        The outputs of the dense fit of ``polyjax._fit``: ``((mean, rotation, centre, halfwidth), coef (D, r, m),
-        l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
+        A dict of arrays: the PCA and scaling, ``t (n, k)``, the weights, and per degree the column norms
+        ``E``, ``R_1``, ``R_1^{-1}`` and whether the Cholesky factor succeeded. The same for every material on
+        one grid: :func:`polyjax.fit_polynomial` keeps the last one.
     """
     block = BLOCK if block is None else int(block)
     n = x.shape[0]
@@ -90,15 +94,10 @@ def streamed_lane(x, y, wl, wc2l, active, *, max_degree, basis, interactions, rc
     pca, centre, hw, t = fitted_scaling(x, keep, basis)
     pos = wc2l > 0
     sw = jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
-    hi = jax.lax.Precision.HIGHEST
-
-    def rows(t_b, sw_b):  # A's rows: dropped samples are exact zero rows, also where their design is not finite
-        d = design_matrix(t_b, max_degree, basis, interactions)
-        return jnp.where(sw_b[:, None] > 0, d * sw_b[:, None], 0.0)
 
     def gram(t_b, sw_b):
-        a = rows(t_b, sw_b)
-        return jnp.matmul(a.T, a, precision=hi)
+        a = _rows(t_b, sw_b, max_degree, basis, interactions)
+        return jnp.matmul(a.T, a, precision=_HI)
 
     g = _stream_sum(gram, n, block, (t, sw), (0, 0))
     m = g.shape[0]
@@ -115,12 +114,43 @@ def streamed_lane(x, y, wl, wc2l, active, *, max_degree, basis, interactions, rc
         return scale, r1, r1inv * act[:, None], pad, ok1
 
     scale, r1, r1inv, pad, ok1 = jax.vmap(first)(active)
+    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=wc2l,
+                den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1=r1, r1inv=r1inv, pad=pad, ok1=ok1)
+
+
+_HI = jax.lax.Precision.HIGHEST
+
+
+def _rows(t_b, sw_b, max_degree, basis, interactions):
+    """Rows of ``A = W^{1/2} D``: dropped samples are exact zero rows, also where their design is not finite."""
+    d = design_matrix(t_b, max_degree, basis, interactions)
+    return jnp.where(sw_b[:, None] > 0, d * sw_b[:, None], 0.0)
+
+
+def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, dense, block=None):
+    """The shared-design fit of every right-hand side of ``y (r, n)`` for every degree, streamed.
+
+    Args:
+        geo: :func:`stream_geometry` of the samples.
+        y: ``(r, n)`` values; ``active``: ``(D, m)`` columns per degree.
+        max_degree, basis, interactions, rcond: as in :func:`polyjax.fit_polynomial`.
+        dense: ``() -> outputs``, the dense fit, run instead when a Cholesky factor fails.
+        block: rows per block (default :data:`BLOCK`).
+
+    Returns:
+        The outputs of the dense fit of ``polyjax._fit``: ``((mean, rotation, centre, halfwidth), coef (D, r, m),
+        l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
+    """
+    block = BLOCK if block is None else int(block)
+    t, sw, wc2l = geo["t"], geo["sw"], geo["wc2"]
+    n = t.shape[0]
+    eye = jnp.eye(geo["r1"].shape[-1], dtype=t.dtype)
 
     def second(t_b, y_b, sw_b):
-        a = rows(t_b, sw_b)
+        a = _rows(t_b, sw_b, max_degree, basis, interactions)
         b = jnp.where(sw_b[:, None] > 0, y_b.T * sw_b[:, None], 0.0)  # (B, r)
-        q1 = jnp.einsum("bm,dm,dmj->dbj", a, 1.0 / scale, r1inv, precision=hi)  # (D, B, m)
-        return (jnp.einsum("dbi,dbj->dij", q1, q1, precision=hi), jnp.einsum("dbi,br->dir", q1, b, precision=hi))
+        q1 = jnp.einsum("bm,dm,dmj->dbj", a, 1.0 / geo["scale"], geo["r1inv"], precision=_HI)  # (D, B, m)
+        return jnp.einsum("dbi,dbj->dij", q1, q1, precision=_HI), jnp.einsum("dbi,br->dir", q1, b, precision=_HI)
 
     c, q1tb = _stream_sum(second, n, block, (t, y, sw), (0, 1, 0))
 
@@ -134,20 +164,21 @@ def streamed_lane(x, y, wl, wc2l, active, *, max_degree, basis, interactions, rc
         (coef, rank, cond, _, n_act), _ = _solve_svd(uu, s, vt, uu.T @ qtb, scale, act, n, rcond)
         return coef.T, rank, cond, n_act, ok2  # coef (r, m)
 
-    coef, rank, cond, n_act, ok2 = jax.vmap(finish)(active, scale, r1, c, q1tb, pad)
-    ok = jnp.all(ok1) & jnp.all(ok2)
+    coef, rank, cond, n_act, ok2 = jax.vmap(finish)(active, geo["scale"], geo["r1"], c, q1tb, geo["pad"])
+    ok = jnp.all(geo["ok1"]) & jnp.all(ok2)
 
     def streamed():
         def residuals(t_b, y_b, wc2_b):
             d = design_matrix(t_b, max_degree, basis, interactions)
-            res = jnp.where(wc2_b > 0, y_b[None] - jnp.einsum("bm,drm->drb", d, coef, precision=hi), 0.0)
+            res = jnp.where(wc2_b > 0, y_b[None] - jnp.einsum("bm,drm->drb", d, coef, precision=_HI), 0.0)
             return jnp.sum(wc2_b * res * res, axis=-1)  # (D, r)
 
         num = _stream_sum(residuals, n, block, (t, y, wc2l), (0, 1, 0))
-        den = jnp.sum(wl)
+        den = geo["den"]
         nz = (den > 0) & (num != 0)
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
         l2 = jnp.where(den > 0, l2, jnp.inf)
-        return (pca.mean, pca.rotation, centre, hw), coef, l2, rank, cond, n_act, jnp.sum(keep)
+        tr = (geo["mean"], geo["rotation"], geo["centre"], geo["halfwidth"])
+        return tr, coef, l2, rank, cond, n_act, geo["n_used"]
 
     return jax.lax.cond(ok, streamed, dense)
