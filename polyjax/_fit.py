@@ -132,6 +132,8 @@ def _streamed_geometry(inp, degrees, **static):
             and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
         return hit["geo"]
     geo = _geometry_kernel(inp, np.asarray(degrees, np.int32), **static)
+    if not is_concrete(geo):
+        return geo
     try:
         _GEOMETRY_MEMO["last"] = dict(key=key, u=weakref.ref(inp.u), v=weakref.ref(inp.v), w=w.copy(), m=m.copy(),
                                       geo=geo)

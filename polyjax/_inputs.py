@@ -170,6 +170,8 @@ def _unit_directions(u, v):
     if hit is not None and hit[0]() is u and hit[1]() is v:
         return hit[2]
     out = _normalize_pair(u, v)
+    if not is_concrete(out):  # concrete arrays closed over inside a trace give traced results: never kept
+        return out
     try:
         _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), out)
     except TypeError:  # an array type without weak references: not remembered
