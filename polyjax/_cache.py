@@ -41,7 +41,8 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     compile in under a second, which are most of polyjax's): the thresholds
     ``jax_persistent_cache_min_compile_time_secs`` and ``jax_persistent_cache_min_entry_size_bytes`` are set to
     0 and -1. Later processes with the same shapes, options and JAX version load the programs instead of
-    compiling them (``polyjax fit`` drops from about 3 s to about 1 s, mostly import, on a 2-core machine).
+    compiling them (a warm ``polyjax fit`` takes about 0.4 of a cold one: ``benchmarks/bench_latency_cli.py``).
+    Tracing and lowering still run in every process (the cache is keyed by the lowered program).
 
     Args:
         path: the cache folder; default :func:`default_cache_dir` (``$POLYJAX_CACHE`` or
