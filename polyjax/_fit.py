@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Sequence
 
 import jax
@@ -13,24 +14,33 @@ from jaxtyping import ArrayLike
 from ._basis import BASES, n_terms, term_degrees
 from ._design import fitted_design
 from ._errors import InputError
-from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
+from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._lstsq import METHODS, weighted_lstsq
 from ._measurements import Measurements
 from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
+from ._stream import stream_geometry, streamed_lane, use_stream
 from ._variables import get_variables
 
 
 @functools.partial(
-    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg"),
+    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg",
+                              "batch", "scalar", "stream"),
 )
-def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg):
-    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays."""
+def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
+                batch, scalar, stream=False, geometry=None):
+    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
+    (``(*batch, ...)`` when ``scalar``); ``stream``: the shared design is streamed (:mod:`polyjax._stream`),
+    from ``geometry`` (:func:`_geometry_kernel`) when given."""
     u, v, values = inp.u, inp.v, inp.values
-    x = get_variables(variables).fn(u, v)
-    k = x.shape[-1]
-    w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+    k = get_variables(variables).k
+
+    def samples():  # computed where used: a streamed fit from a given geometry never needs them
+        x = get_variables(variables).fn(u, v)
+        w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+        return x, w, wc2
+
     tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
     n_deg, nb = degrees.shape[0], values.shape[0]
@@ -43,7 +53,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
         return jnp.where(den > 0, l2, jnp.inf)
 
-    def lane(y, wl, wc2l):
+    def lane(y, wl, wc2l, x):
         """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
         keep = wl > 0
         pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
@@ -52,13 +62,26 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
         return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
-    if inp.shared:  # one design, one factorisation, nb right-hand sides
-        tr, coef, l2, rank, cond, n_act, n_used = lane(values, w[0], wc2[0])
+    def dense_shared():
+        x, w, wc2 = samples()
+        return lane(values, w[0], wc2[0], x)
+
+    if inp.shared and stream:  # the same, the design built block by block and never held
+        geo = _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg) if geometry is None \
+            else geometry
+        tr, coef, l2, rank, cond, n_act, n_used = streamed_lane(
+            geo, values, active, max_degree=max_degree, basis=basis, interactions=interactions, rcond=rcond,
+            dense=dense_shared,
+        )
+    if inp.shared and not stream:  # one design, one factorisation, nb right-hand sides
+        tr, coef, l2, rank, cond, n_act, n_used = dense_shared()
+    if inp.shared:
         tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
     else:
-        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l))
+        x, w, wc2 = samples()
+        per_lane = jax.vmap(lambda y, wl, wc2l: lane(y[None], wl, wc2l, x))
         tr, coef, l2, rank, cond, n_act, n_used = per_lane(values, w, wc2)
         coef, l2 = jnp.swapaxes(coef[:, :, 0], 0, 1), jnp.swapaxes(l2[:, :, 0], 0, 1)  # lane axis after degrees
         rank, cond, n_act = (jnp.swapaxes(a, 0, 1) for a in (rank, cond, n_act))
@@ -72,12 +95,51 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
-    return dict(
+    out = dict(
         coefficients=coef.astype(values.dtype),
         degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
         mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
         n_used=n_used.astype(jnp.int32), status=status,
     )
+    lead = () if scalar else (n_deg,)  # (D, B, ...) -> (D?, *batch, ...) inside the program: no eager reshapes
+    return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
+
+
+def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
+    x = get_variables(variables).fn(inp.u, inp.v)
+    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
+    return stream_geometry(x, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions)
+
+
+@functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))
+def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions, cutoff_deg):
+    """The values-independent half of a streamed fit (:func:`polyjax._stream.stream_geometry`), compiled alone."""
+    k = get_variables(variables).k
+    active = jnp.asarray(term_degrees(k, max_degree, interactions))[None, :] <= degrees[:, None]
+    return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
+
+
+_GEOMETRY_MEMO: dict = {}
+
+
+def _streamed_geometry(inp, degrees, **static):
+    """The geometry of a streamed fit, remembered for the next fit on the same samples (the same direction arrays
+    by identity, equal weights and mask, the same options): one entry, the last one."""
+    key = (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
+    hit = _GEOMETRY_MEMO.get("last")
+    w, m = np.asarray(inp.weights), np.asarray(inp.mask)
+    if (hit is not None and hit["key"] == key and hit["u"]() is inp.u and hit["v"]() is inp.v
+            and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
+        return hit["geo"]
+    geo = _geometry_kernel(inp, np.asarray(degrees, np.int32), **static)
+    if not is_concrete(geo):
+        return geo
+    try:
+        _GEOMETRY_MEMO["last"] = dict(key=key, u=weakref.ref(inp.u), v=weakref.ref(inp.v), w=w.copy(), m=m.copy(),
+                                      geo=geo)
+    except TypeError:  # arrays without weak references: not remembered
+        _GEOMETRY_MEMO.pop("last", None)
+    return geo
 
 
 def _check_options(basis, method, rank_deficient, degree):
@@ -178,11 +240,14 @@ def fit_polynomial(
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
-    out = _fit_kernel(inp, jnp.asarray(degrees, jnp.int32), variables=vs.name, max_degree=max_degree, basis=basis,
-                      interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff)
     scalar = np.ndim(degree) == 0
-    lead = () if scalar else (degrees.size,)
-    out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
+    stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
+                        is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
+    static = dict(variables=vs.name, max_degree=max_degree, basis=basis, interactions=bool(interactions),
+                  cutoff_deg=cutoff)
+    geometry = _streamed_geometry(inp, degrees, **static) if stream else None
+    out = _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch, scalar=scalar,
+                      stream=stream, geometry=geometry, **static)
     model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
                            max_degree=max_degree)
     if throw or rank_deficient == "error":

@@ -23,6 +23,9 @@ inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the ho
 
 from __future__ import annotations
 
+import functools
+import weakref
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -142,11 +145,63 @@ def _check_directions(u, v, concrete: bool) -> int:
 def _lane_array(name, a, n, batch, dtype):
     """``weights``/``mask`` as ``(1, n)`` (shared) or ``(B, n)``; the shape rule of the module."""
     a = jnp.asarray(a, dtype)
-    if a.shape == (n,):
-        return a[None]
-    if tuple(a.shape) == tuple(batch) + (n,):
-        return a.reshape(-1, n)
+    if a.shape == (n,) or tuple(a.shape) == tuple(batch) + (n,):
+        return a  # flattened to (1, n) / (B, n) inside the compiled _prepare_core
     raise _lane_shape_error(name, a.shape, n, batch)
+
+
+@jax.jit
+def _normalize_pair(u, v):
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    return u, v, ok_u & ok_v
+
+
+_UNIT_MEMO: dict = {}
+
+
+def _unit_directions(u, v):
+    """Unit ``u``, ``v`` and where both have a direction. The last concrete pair is remembered by identity: the
+    loaders hand out the same device arrays for a shared grid (every MERL ``.binary`` file), whose million
+    directions are then normalised once, not once per fit."""
+    if not is_concrete(u, v):
+        return _normalize_pair(u, v)
+    hit = _UNIT_MEMO.get("pair")
+    if hit is not None and hit[0]() is u and hit[1]() is v:
+        return hit[2]
+    out = _normalize_pair(u, v)
+    if not is_concrete(out):  # concrete arrays closed over inside a trace give traced results: never kept
+        return out
+    try:
+        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), out)
+    except TypeError:  # an array type without weak references: not remembered
+        _UNIT_MEMO.pop("pair", None)
+    return out
+
+
+@functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))
+def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
+    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks."""
+    n = values.shape[-1]
+    y = values.reshape(-1, n)
+    nb = y.shape[0]
+    w = jnp.ones((1, n), y.dtype) if w is None else w.reshape(-1, n)
+    m = jnp.ones((1, n), bool) if m is None else m.reshape(-1, n)
+    w_bad = ~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)
+    m = m & ok[None]
+    finite = jnp.isfinite(y)
+    bad = m & ~finite  # (B, n)
+    any_bad = jnp.any(bad)
+    if nonfinite == "mask":
+        m = m & finite
+        lane_bad = jnp.zeros((nb,), bool)
+    else:
+        lane_bad = jnp.any(bad, axis=-1)
+    if not shared:
+        w = jnp.broadcast_to(w, (nb, n))
+        m = jnp.broadcast_to(m, (nb, n))
+    y = jnp.where(finite, y, 0.0)
+    return u, v, y, w, m, lane_bad, w_bad, any_bad
 
 
 def prepare_inputs(
@@ -173,32 +228,23 @@ def prepare_inputs(
                          f"{values.shape}")
     batch = tuple(values.shape[:-1])
     nb = int(np.prod(batch)) if batch else 1
-    y = values.reshape(nb, n)
-    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype)
-    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool)
-    if is_concrete(w) and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
+    w = None if weights is None else _lane_array("weights", weights, n, batch, dtype)
+    m = None if mask is None else _lane_array("mask", mask, n, batch, bool)
+    shared = (w is None or w.ndim == 1) and (m is None or m.ndim == 1) and (nonfinite == "error" or nb == 1)
+    # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
+    # in every process: most of a warm `polyjax fit`)
+    u, v, ok = _unit_directions(u, v)
+    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, ok, values, w, m, nonfinite=nonfinite,
+                                                            shared=shared)
+    if is_concrete(w_bad) and bool(w_bad):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
-    m = m & (ok_u & ok_v)[None]
-    finite = jnp.isfinite(y)
-    bad = m & ~finite  # (B, n)
-    if nonfinite == "error" and is_concrete(y, m) and bool(jnp.any(bad)):
-        where = np.argwhere(np.asarray(bad).reshape(values.shape))
+    if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):
+        bad = np.asarray(m) & ~np.isfinite(np.asarray(values).reshape(nb, n))
+        where = np.argwhere(bad.reshape(values.shape))
         raise InputError(
             f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
             f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
         )
-    shared = w.shape[0] == 1 and m.shape[0] == 1 and (nonfinite == "error" or nb == 1)
-    if nonfinite == "mask":
-        m = m & finite
-        lane_bad = jnp.zeros((nb,), bool)
-    else:
-        lane_bad = jnp.any(bad, axis=-1)
-    if not shared:
-        w = jnp.broadcast_to(w, (nb, n))
-        m = jnp.broadcast_to(m, (nb, n))
-    y = jnp.where(finite, y, 0.0)
     return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared), cutoff
 
 

@@ -72,6 +72,8 @@ class PolynomialBRDF(eqx.Module):
     def n_params(self) -> Int[Array, "*batch"]:
         """Number of parameters of each lane: ``k p + 1`` (or ``C(k+p, p)`` with interactions)."""
         table = np.array([n_terms(self.k, p, self.interactions) for p in range(self.max_degree + 1)])
+        if not isinstance(self.degree, jax.core.Tracer):  # no compiled program for a table look-up
+            return table[np.asarray(self.degree)]
         return jnp.asarray(table)[self.degree]
 
     @property

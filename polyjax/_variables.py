@@ -120,6 +120,11 @@ _REGISTRY: dict[str, VariableSet] = {}
 _ALIASES = {"as": "ashikhmin-shirley", "ashikhmin": "ashikhmin-shirley", "laf": "lafortune"}
 
 
+def _register_builtin(name: str, fn: VariableFn, k: int, description: str) -> None:
+    """A built-in set, symmetric by construction (tested): registered without running JAX on import."""
+    _REGISTRY[name] = VariableSet(name, fn, k, True, description)
+
+
 def register_variables(
     name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False
 ) -> VariableSet:
@@ -149,7 +154,9 @@ def register_variables(
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
     out = jnp.asarray(fn(jnp.asarray(w[0]), jnp.asarray(w[1])))
     if out.shape != (8, int(k)):
-        raise InputError(f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned {out.shape}")
+        raise InputError(
+            f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned {out.shape}"
+        )
     if symmetric:
         swapped = jnp.asarray(fn(jnp.asarray(w[1]), jnp.asarray(w[0])))
         if not bool(jnp.allclose(out, swapped, rtol=1e-5, atol=1e-6)):
@@ -181,16 +188,10 @@ def explanatory_variables(name: str, u, v) -> Float[Array, "... k"]:
     return get_variables(name).fn(jnp.asarray(u), jnp.asarray(v))
 
 
-register_variables("ward", _ward, 2, symmetric=True, description="n.h, (n.u)(n.v)  [paper sec. 3.1]")
-register_variables(
-    "ashikhmin-shirley", _ashikhmin_shirley, 3, symmetric=True, description="n.h, v.h, max(n.u, n.v)  [paper eq. (9)]"
-)
-register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]")
-register_variables(
-    "lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True, description="ux vx, uy vy, uz vz  [paper eq. (10)]"
-)
-register_variables("rusinkiewicz", _rusinkiewicz, 2, symmetric=True, description="theta_h, theta_d  [Rusinkiewicz 1998]")
-register_variables(
-    "rusinkiewicz-phid", _rusinkiewicz_phid, 3, symmetric=True,
-    description="theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  [Rusinkiewicz 1998]",
-)
+_register_builtin("ward", _ward, 2, "n.h, (n.u)(n.v)  [paper sec. 3.1]")
+_register_builtin("ashikhmin-shirley", _ashikhmin_shirley, 3, "n.h, v.h, max(n.u, n.v)  [paper eq. (9)]")
+_register_builtin("lafortune", _lafortune, 2, "ux vx + uy vy, uz vz  [paper sec. 3.3]")
+_register_builtin("lafortune-anisotropic", _lafortune_anisotropic, 3, "ux vx, uy vy, uz vz  [paper eq. (10)]")
+_register_builtin("rusinkiewicz", _rusinkiewicz, 2, "theta_h, theta_d  [Rusinkiewicz 1998]")
+_register_builtin("rusinkiewicz-phid", _rusinkiewicz_phid, 3,
+                  "theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  [Rusinkiewicz 1998]")
