@@ -4,10 +4,12 @@ Every model is a pure JAX function ``f(params, u, v)`` (constrained parameters, 
 ``(..., 3)`` in the local frame, normal ``+z``, ``u`` light, ``v`` view), registered by name in
 :data:`MODELS`. :func:`fit` fits any of them to measurements with the same objective as
 :func:`polyjax.fit_polynomial` (paper equation (11), 80-degree cutoff) by batched multi-start
-Levenberg-Marquardt; Zernike is linear and solved in closed form. Enable float64 in your entry
+Levenberg-Marquardt; Zernike is linear and solved in closed form. ``"sgd"`` and ``"abc"`` are the
+compact models whose fits of the 100 MERL materials are published (:func:`published`). Enable float64 in your entry
 point (``jax.config.update("jax_enable_x64", True)``).
 """
 
+from ._abc import abc
 from ._ashikhmin_shirley import ashikhmin_shirley
 from ._blinn_phong import blinn_phong
 from ._common import BaselineModel, Transform
@@ -16,9 +18,11 @@ from ._fit import fit
 from ._lafortune import lafortune
 from ._lafortune_anisotropic import lafortune_anisotropic
 from ._oren_nayar import oren_nayar
+from ._published import published, published_materials
 from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, get_model
 from ._result import BaselineFit, BaselineStatus
 from ._saving import KIND as SAVED_MODEL_KIND
+from ._sgd import sgd
 from ._solvers import BACKENDS, residuals
 from ._starts import initial_guesses
 from ._ward import ward
@@ -28,8 +32,8 @@ from ._zernike import disk_point, n_zernike_terms, zernike, zernike_design, zern
 
 __all__ = [
     "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS",
-    "PAPER_MODELS",
-    "Transform", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit", "get_model",
-    "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms", "oren_nayar", "residuals", "ward",
-    "ward_anisotropic", "ward_duer", "zernike", "zernike_design", "zernike_terms",
+    "PAPER_MODELS", "Transform", "abc", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit",
+    "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms", "oren_nayar",
+    "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer", "zernike",
+    "zernike_design", "zernike_terms",
 ]

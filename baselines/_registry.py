@@ -7,12 +7,14 @@ import numpy as np
 from polyjax import UnknownNameError
 
 from . import (
+    _abc,
     _ashikhmin_shirley,
     _blinn_phong,
     _cook_torrance,
     _lafortune,
     _lafortune_anisotropic,
     _oren_nayar,
+    _sgd,
     _ward,
     _ward_anisotropic,
     _ward_duer,
@@ -36,6 +38,7 @@ ZERNIKE = BaselineModel(
 _ALL = (
     _ashikhmin_shirley.MODEL, _blinn_phong.MODEL, _cook_torrance.MODEL, _lafortune.MODEL, _oren_nayar.MODEL,
     _ward.MODEL, _ward_duer.MODEL, ZERNIKE, _lafortune_anisotropic.MODEL, _ward_anisotropic.MODEL,
+    _sgd.MODEL, _abc.MODEL,
 )
 REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}
 
@@ -43,7 +46,8 @@ REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}
 MODELS: tuple[str, ...] = tuple(REGISTRY)
 #: The paper's seven nonlinear models plus Zernike (its Table 2 rows), isotropic.
 PAPER_MODELS: tuple[str, ...] = MODELS[:8]
-#: The nonlinear isotropic models (fitted by Levenberg-Marquardt).
+#: The paper's nonlinear isotropic models (fitted by Levenberg-Marquardt); ``"sgd"`` and ``"abc"`` (the
+#: published compact models of the 100 MERL materials, :func:`baselines.published`) come after them.
 NONLINEAR_MODELS: tuple[str, ...] = MODELS[:7]
 
 

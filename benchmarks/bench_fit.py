@@ -96,14 +96,19 @@ def main(argv=None):
         for r in (ref, ref_multi) for var in VARIABLES for i, p in enumerate(DEGREES) for j in range(bn.shape[0])
     )
 
-    print(f"fits: {len(VARIABLES)} variable sets x {len(DEGREES)} degrees x {bn.shape[0]} CUReT samples = {n_fits} in one jitted call")
+    print(f"fits: {len(VARIABLES)} variable sets x {len(DEGREES)} degrees x {bn.shape[0]} CUReT samples = {n_fits} "
+          "in one jitted call")
     print(f"compile (first call)       : {compile_s:.2f} s")
-    print(f"polyjax per fit (median of {args.repeats}): {ours * 1e3:.4f} ms   [target < 0.1 ms: {'MET' if ours < 1e-4 else 'MISSED'}]")
+    print(f"polyjax per fit (median of {args.repeats}): {ours * 1e3:.4f} ms   "
+          f"[target < 0.1 ms: {'MET' if ours < 1e-4 else 'MISSED'}]")
     print(f"numpy lstsq loop per fit   : {numpy_s * 1e3:.4f} ms   -> polyjax is {numpy_s / ours:.1f}x faster")
-    print(f"numpy multi-RHS per fit    : {numpy_multi_s * 1e3:.4f} ms   -> polyjax is {numpy_multi_s / ours:.1f}x faster")
-    print(f"paper Table 4 per fit      : {PAPER_SECONDS_PER_FIT * 1e3:.2f} ms   -> polyjax is {PAPER_SECONDS_PER_FIT / ours:.0f}x faster (different machine)")
+    print(f"numpy multi-RHS per fit    : {numpy_multi_s * 1e3:.4f} ms   "
+          f"-> polyjax is {numpy_multi_s / ours:.1f}x faster")
+    print(f"paper Table 4 per fit      : {PAPER_SECONDS_PER_FIT * 1e3:.2f} ms   "
+          f"-> polyjax is {PAPER_SECONDS_PER_FIT / ours:.0f}x faster (different machine)")
     print(f"largest relative L2 difference polyjax vs numpy: {worst:.2e}")
-    return dict(per_fit=ours, numpy_per_fit=numpy_s, numpy_multi_rhs_per_fit=numpy_multi_s, compile=compile_s, max_rel_diff=worst)
+    return dict(per_fit=ours, numpy_per_fit=numpy_s, numpy_multi_rhs_per_fit=numpy_multi_s, compile=compile_s,
+                max_rel_diff=worst)
 
 
 if __name__ == "__main__":

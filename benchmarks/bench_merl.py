@@ -3,7 +3,10 @@
 Two sources per material: a MERL ``.binary`` file of the real layout (written once from the neural fit
 into a temporary folder) and the neural-BRDF networks evaluated on the MERL grid. The physical floor
 is the time to stream the same 34,992,012 bytes from memory (a ``numpy`` copy of an in-memory buffer),
-measured in the same run. Target: load + fit under 1 s per material on a 2-core CPU.
+measured in the same run. Target: load + fit (``.binary``) at most 15x that floor. The fit of concrete data is
+streamed (``polyjax/_stream.py``: the design is built in row blocks and never held); the dense fit (the path a
+traced, differentiable call takes; here the same call under ``jax.jit``) is timed beside it, and the two L2 must
+agree to 1e-10 (relative).
 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_merl.py [n_materials]``
 """
@@ -37,6 +40,17 @@ def fit(d):
     return m
 
 
+@jax.jit
+def _dense(d):  # traced inputs: the dense (differentiable) path
+    return pj.fit_polynomial(d, variables="lafortune", degree=5)
+
+
+def fit_dense(d):
+    m = _dense(d)
+    m.coefficients.block_until_ready()
+    return m
+
+
 def main(n_materials: int = 6):
     names = pj.data.TABLE3_MATERIALS[:n_materials]
     with tempfile.TemporaryDirectory() as tmp:
@@ -50,26 +64,33 @@ def main(n_materials: int = 6):
         # warm-up: compile the fit kernel and the network once for this shape
         fit(pj.data.load_merl_binary(files[names[0]]))
         fit(pj.data.load_merl_nbrdf(names[0]))
+        fit_dense(pj.data.load_merl_binary(files[names[0]]))
 
         blob = files[names[0]].read_bytes()
         floor = best_of(lambda: np.frombuffer(blob, np.uint8).copy())
         rows = []
         for name in names:
-            t_bin_load = best_of(lambda: pj.data.load_merl_binary(files[name]).values.block_until_ready(), 2)
-            t_nb_load = best_of(lambda: pj.data.load_merl_nbrdf(name).values.block_until_ready(), 2)
+            t_bin_load = best_of(lambda name=name: pj.data.load_merl_binary(files[name]).values.block_until_ready(), 2)
+            t_nb_load = best_of(lambda name=name: pj.data.load_merl_nbrdf(name).values.block_until_ready(), 2)
             d = pj.data.load_merl_binary(files[name])
-            t_fit = best_of(lambda: fit(d), 2)
+            t_fit = best_of(lambda d=d: fit(d), 2)
+            t_dense = best_of(lambda d=d: fit_dense(d), 2)
             l2 = np.asarray(fit(d).l2)
-            rows.append((name, d.n_samples, t_bin_load, t_nb_load, t_fit, l2))
+            l2_dense = np.asarray(fit_dense(d).l2)
+            rel = float(np.max(np.abs(l2 - l2_dense) / l2_dense))
+            rows.append((name, d.n_samples, t_bin_load, t_nb_load, t_fit, l2, t_dense, rel))
     print(f"stream {len(blob):,} bytes from memory (floor): {floor * 1e3:.1f} ms")
     print(f"{'material':22s} {'n':>9s} {'binary load':>12s} {'nbrdf load':>11s} {'fit p=5':>9s} "
-          f"{'bin load+fit':>13s} {'/floor':>7s}  L2 (R, G, B)")
-    for name, n, tb, tn, tf, l2 in rows:
+          f"{'bin load+fit':>13s} {'/floor':>7s} {'dense fit':>10s} {'L2 rel diff':>12s}  L2 (R, G, B)")
+    for name, n, tb, tn, tf, l2, td, rel in rows:
         tot = tb + tf
         print(f"{name:22s} {n:9d} {tb * 1e3:10.0f}ms {tn * 1e3:9.0f}ms {tf * 1e3:7.0f}ms {tot * 1e3:11.0f}ms "
-              f"{tot / floor:7.0f}  {np.array2string(l2, precision=4)}")
-    mean = np.mean([r[2] + r[4] for r in rows])
-    print(f"mean load+fit per material: {mean:.2f} s (target < 1 s): {'met' if mean < 1 else 'NOT met'}")
+              f"{tot / floor:7.1f} {td * 1e3:8.0f}ms {rel:12.1e}  {np.array2string(l2, precision=4)}")
+    ratio = np.mean([(r[2] + r[4]) / floor for r in rows])
+    worst = max(r[7] for r in rows)
+    print(f"mean load+fit / floor: {ratio:.1f}x (target <= 15x): {'met' if ratio <= 15 else 'NOT met'}; "
+          f"streamed fit {np.mean([r[6] / r[4] for r in rows]):.1f}x faster than the dense fit; "
+          f"L2 equal to the dense fit to {worst:.1e} (target 1e-10): {'met' if worst <= 1e-10 else 'NOT met'}")
 
 
 if __name__ == "__main__":

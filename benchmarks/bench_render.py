@@ -61,8 +61,8 @@ def main():
     print(f"model: p = 5 polynomial ({model.variables}) fitted to {name}; {args.size} x {args.size} pixels; "
           f"{jax.device_count()} device(s), backend {jax.default_backend()}")
     for label, scene in scenes.items():
-        needed, t_needed = timed(lambda: pr.render(scene, spp=args.spp), args.repeat)
-        forced, t_all = timed(lambda: pr.render(scene, spp=args.spp, force_all_effects=True), args.repeat)
+        needed, t_needed = timed(lambda scene=scene: pr.render(scene, spp=args.spp), args.repeat)
+        forced, t_all = timed(lambda scene=scene: pr.render(scene, spp=args.spp, force_all_effects=True), args.repeat)
         same = bool(np.array_equal(np.asarray(needed.image), np.asarray(forced.image)))
         print(f"{label}:")
         print(f"  only needed  {t_needed * 1e3:9.1f} ms  effects {needed.effects.names()}")

@@ -54,17 +54,20 @@ def main(argv=None):
     args = ap.parse_args(argv)
     sets = {
         "Quarry tile (CUReT 25)": pj.data.load("curet:25"),
-        f"green-latex ({args.subsample} bins, RGB)": pj.data.load("merl-nbrdf:green-latex", subsample=args.subsample, seed=0),
+        f"green-latex ({args.subsample} bins, RGB)": pj.data.load("merl-nbrdf:green-latex", subsample=args.subsample,
+                                                                 seed=0),
     }
     summary = []
     for title, d in sets.items():
         for var in args.variables:
             rows = measure(d, var)
             print(f"\n{title}, {var}")
-            print("  p | cond Legendre | cond monomial | f32/f64 L2 Legendre | f32/f64 L2 monomial | f32 not OK (leg/mono)")
+            print("  p | cond Legendre | cond monomial | f32/f64 L2 Legendre | f32/f64 L2 monomial | "
+                  "f32 not OK (leg/mono)")
             for r in rows:
                 print(f"{r['p']:3d} | {r['cond_legendre']:13.3g} | {r['cond_monomial']:13.3g} | "
-                      f"{r['ratio_legendre']:19.7f} | {r['ratio_monomial']:19.7f} | {r['rd32_legendre']}/{r['rd32_monomial']}")
+                      f"{r['ratio_legendre']:19.7f} | {r['ratio_monomial']:19.7f} | "
+                      f"{r['rd32_legendre']}/{r['rd32_monomial']}")
             summary.append((title, var, max(r["cond_legendre"] for r in rows), max(r["cond_monomial"] for r in rows),
                             max(abs(np.log(r["ratio_legendre"])) for r in rows),
                             max(abs(np.log(r["ratio_monomial"])) for r in rows)))

@@ -36,7 +36,7 @@ def timed(scene, spp, mode, repeat):
     out = render(scene, spp, mode)
     jax.block_until_ready(out.image)  # compile + first run
     best = np.inf
-    for r in range(repeat):
+    for _ in range(repeat):
         t0 = time.perf_counter()
         out = render(scene, spp, mode, seed=1)
         jax.block_until_ready(out.image)

@@ -7,9 +7,10 @@ least squares. Enable float64 in your entry point (``jax.config.update("jax_enab
 for fitting; polyjax does not change global JAX settings on import.
 """
 
-from . import data, export, render, svbrdf
+from . import data
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
+from ._cache import CACHE_ENV, default_cache_dir, enable_compilation_cache
 from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
 from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
@@ -27,6 +28,7 @@ from ._geometry import (
 from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._io import load_model, save_model
 from ._kinds import ModelKind, model_kinds, register_model_kind
+from ._logfit import fit_log_polynomial
 from ._lstsq import LstsqSolution, weighted_lstsq
 from ._measurements import Measurements, check_samples, make_measurements
 from ._metrics import fit_weights, l2_error, psnr
@@ -37,12 +39,30 @@ from ._variables import VariableSet, explanatory_variables, get_variables, regis
 
 __version__ = "0.1.0"
 
+_LAZY_SUBMODULES = ("export", "render", "svbrdf")  # imported on first use: they pull in far more than a fit needs
+
+
+def __getattr__(name):
+    if name in _LAZY_SUBMODULES:
+        import importlib
+
+        module = importlib.import_module(f".{name}", __name__)
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module 'polyjax' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_SUBMODULES))
+
+
 __all__ = [
-    "ApproximationError", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus", "InputError",
-    "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF", "PreparedInputs",
-    "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error", "cartesian_to_spherical",
-    "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data", "data_root", "design_matrix",
-    "evaluate_paper_form", "explanatory_variables", "export", "exponents", "fit_pca", "fit_polynomial",
+    "ApproximationError", "CACHE_ENV", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus",
+    "InputError", "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF",
+    "PreparedInputs", "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error",
+    "cartesian_to_spherical", "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data",
+    "data_root", "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form",
+    "explanatory_variables", "export", "exponents", "fit_log_polynomial", "fit_pca", "fit_polynomial",
     "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
     "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",

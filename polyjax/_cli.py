@@ -77,6 +77,7 @@ def cmd_fit(args) -> int:
 
     import polyjax as pj
 
+    from ._cache import compile_notice
     from ._kinds import fitter_for, kind_of
     from ._outputs import check_output_file
 
@@ -88,14 +89,15 @@ def cmd_fit(args) -> int:
         check_output_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
     t0 = time.perf_counter()
-    if polynomial:
-        model = pj.fit_polynomial(
-            data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
-            cutoff_deg=args.cutoff,
-        )
-    else:
-        model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
-    l2 = np.asarray(model.l2)
+    with compile_notice("the fit", getattr(args, "cache_in_use", None)):
+        if polynomial:
+            model = pj.fit_polynomial(
+                data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
+                cutoff_deg=args.cutoff,
+            )
+        else:
+            model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
+        l2 = np.asarray(model.l2)
     elapsed = time.perf_counter() - t0
     if polynomial:
         beta = model.paper_coefficients() if not args.interactions else np.asarray(model.coefficients)
@@ -123,7 +125,8 @@ def cmd_fit(args) -> int:
                  enumerate(zip(l2.ravel(), zero.ravel(), barely.ravel())) if b]
         warnings_.append(
             f"{len(lanes)} fit(s) barely beat the zero model f = 0 (L2 above {ZERO_MODEL_RATIO:g} of its L2): "
-            + "; ".join(lanes) + ". The model cannot follow this data (e.g. a narrow peak); try another model or degree."
+            + "; ".join(lanes)
+            + ". The model cannot follow this data (e.g. a narrow peak); try another model or degree."
         )
     out = {
         "source": data.source,
@@ -172,6 +175,13 @@ def cmd_fit(args) -> int:
 
 def cmd_report(args) -> int:
     """The main job: fit the polynomial models of the paper's Tables 1, 2 and 4 and report them."""
+    from ._cache import compile_notice
+
+    with compile_notice("the report's fits", getattr(args, "cache_in_use", None)):
+        return _report(args)
+
+
+def _report(args) -> int:
     import numpy as np
 
     import polyjax as pj
@@ -181,7 +191,8 @@ def cmd_report(args) -> int:
     if configured_data_root(args.data_root) is None:
         data = pj.data.synthetic_default()
         print(f"NOTE: no measured data (neither --data-root nor {pj.DATA_ENV} given). Running on the {data.source}.")
-        print("      Set POLYJAX_DATA to the data folder (curet/, cornell/, nbrdf_sztrajman2021/) for the real report.\n")
+        print("      Set POLYJAX_DATA to the data folder (curet/, cornell/, nbrdf_sztrajman2021/) "
+              "for the real report.\n")
         for var in ("lafortune", "ward", "ashikhmin-shirley"):
             m = pj.fit_polynomial(data, variables=var, degree=list(range(1, 9)))
             print(f"{var:<18s} L2 for p = 1..8 (rows: {', '.join(data.names)})")
@@ -202,22 +213,32 @@ def cmd_report(args) -> int:
         mm = pj.fit_polynomial(data, variables=var, degree=p)
         l2 = np.asarray(mm.l2)
         dt = time.perf_counter() - t0
-        print(f"  {var:<18s} p={p}: median L2 {np.median(l2):.4f}, max {l2.max():.4f}, all OK: {bool(np.all(np.asarray(mm.ok)))}"
+        all_ok = bool(np.all(np.asarray(mm.ok)))
+        print(f"  {var:<18s} p={p}: median L2 {np.median(l2):.4f}, max {l2.max():.4f}, all OK: {all_ok}"
               f"  ({dt * 1e3:.1f} ms for 52 fits incl. compilation)")
     print("\nComparison with the paper's tables: python benchmarks/reproduce.py (in the source repository)")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="polyjax", description="Fit polynomial (and baseline) BRDF models to measured data.")
+    p = argparse.ArgumentParser(prog="polyjax",
+                                description="Fit polynomial (and baseline) BRDF models to measured data.")
     root_help = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
                  "a folder given that does not exist is an error")
+    cache_help = ("folder of JAX's persistent compilation cache, which lets later runs skip compiling (default: "
+                  "$POLYJAX_CACHE, else $XDG_CACHE_HOME/polyjax/jax or ~/.cache/polyjax/jax)")
+    no_cache_help = "do not read or write the compilation cache (also: POLYJAX_CACHE=off)"
     p.add_argument("--data-root", default=None, help=root_help)
+    p.add_argument("--cache-dir", default=None, help=cache_help)
+    p.add_argument("--no-cache", action="store_true", default=False, help=no_cache_help)
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--data-root", default=argparse.SUPPRESS, help=root_help)
+    common.add_argument("--cache-dir", default=argparse.SUPPRESS, help=cache_help)
+    common.add_argument("--no-cache", action="store_true", default=argparse.SUPPRESS, help=no_cache_help)
     sub = p.add_subparsers(dest="command")
 
-    r = sub.add_parser("report", parents=[common], help="fit the polynomial models of the paper's tables and report them (default)")
+    r = sub.add_parser("report", parents=[common],
+                       help="fit the polynomial models of the paper's tables and report them (default)")
     r.set_defaults(func=cmd_report)
 
     f = sub.add_parser("fit", parents=[common], help="fit a model to one dataset and print L2 and coefficients",
@@ -230,7 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--model", default="polynomial",
                    help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
                    "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")
-    f.add_argument("--variables", default="lafortune", help="ward | ashikhmin-shirley | lafortune | lafortune-anisotropic")
+    f.add_argument("--variables", default="lafortune",
+                   help="ward | ashikhmin-shirley | lafortune | lafortune-anisotropic")
     f.add_argument("--degree", "--degrees", dest="degree", default="7",
                    help="polynomial degree p, or comma-separated degrees fitted in one batch (e.g. 2,3,5); default 7")
     f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"],
@@ -261,6 +283,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _compilation_cache(args):
+    """Turn on the persistent compilation cache unless ``--no-cache`` or ``POLYJAX_CACHE=off``; its folder or None."""
+    from ._cache import cache_disabled_by_env, enable_compilation_cache
+
+    if args.no_cache or (args.cache_dir is None and cache_disabled_by_env()):
+        return None
+    return enable_compilation_cache(args.cache_dir)
+
+
 def main(argv: list[str] | None = None) -> int:
     _x64()
     from ._errors import PolyjaxError
@@ -270,6 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         args.func = cmd_report
     try:
+        args.cache_in_use = _compilation_cache(args)
         return int(args.func(args) or 0)
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)

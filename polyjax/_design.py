@@ -33,6 +33,13 @@ def fitted_design(
     half-width is set to ``inf``: ``t = 0`` here and wherever the model is evaluated, so its
     columns are constants and the fit is flagged rank-deficient (minimum-norm solution).
     """
+    pca, centre, hw, t = fitted_scaling(x, keep, basis)
+    return pca, centre, hw, design_matrix(t, max_degree, basis, interactions)
+
+
+def fitted_scaling(x: Float[Array, "n k"], keep: Bool[Array, " n"], basis: str = "legendre"):
+    """The first half of :func:`fitted_design`: ``(pca, centre, halfwidth, t)`` with ``t (n, k)`` the scaled
+    components ``(Z - centre) / halfwidth`` from which every design row is built."""
     pca = fit_pca(x, keep)
     z = pca(x)
     k = x.shape[-1]
@@ -51,5 +58,4 @@ def fitted_design(
         centre = jnp.zeros((k,), x.dtype)
         hw = jnp.ones((k,), x.dtype)
     hw = jnp.where(flat, jnp.inf, hw)
-    d = design_matrix((z - centre) / hw, max_degree, basis, interactions)
-    return pca, centre, hw, d
+    return pca, centre, hw, (z - centre) / hw

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Sequence
 
 import jax
@@ -13,13 +14,14 @@ from jaxtyping import ArrayLike
 from ._basis import BASES, n_terms, term_degrees
 from ._design import fitted_design
 from ._errors import InputError
-from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
+from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._lstsq import METHODS, weighted_lstsq
 from ._measurements import Measurements
 from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._sharding import lane_sharding, shard_lanes
+from ._stream import stream_geometry, streamed_lane, use_stream
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -27,20 +29,31 @@ LANE_BLOCK = 1024
 
 
 @functools.partial(
-    jax.jit,
-    static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg", "lane_block"),
+    jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond", "cutoff_deg",
+                              "batch", "scalar", "stream", "lane_block"),
 )
 def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, interactions, method, rcond, cutoff_deg,
-                lane_block=LANE_BLOCK):
-    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, B, ...)`` arrays.
+                batch, scalar, stream=False, geometry=None, lane_block=LANE_BLOCK):
+    """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
+    (``(*batch, ...)`` when ``scalar``; ``(D, B, ...)``, the lanes flat, when ``batch`` is None: a sharded fit's
+    block of lanes); ``stream``: the shared design is streamed (:mod:`polyjax._stream`), from ``geometry``
+    (:func:`_geometry_kernel`) when given.
 
     Lanes with samples of their own (per-lane weights, masks or directions) are fitted group by group (a group:
     the lanes sharing one set of samples, e.g. a texel's colour channels), ``lane_block`` lanes at a time:
     :func:`jax.lax.map` over blocks, ``vmap`` inside a block, so memory is bounded by the block, not the batch.
+    Only the shared-design path is ever streamed.
     """
-    values = inp.values
+    u, v, values = inp.u, inp.v, inp.values
     var_fn = get_variables(variables).fn
-    tdeg = jnp.asarray(term_degrees(get_variables(variables).k, max_degree, interactions))
+    k = get_variables(variables).k
+
+    def samples():  # computed where used: a streamed fit from a given geometry never needs them
+        x = var_fn(u, v)
+        w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+        return x, w, wc2
+
+    tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
     active = tdeg[None, :] <= degrees[:, None]  # (D, m)
     n_deg, nb = degrees.shape[0], values.shape[0]
 
@@ -52,7 +65,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
         return jnp.where(den > 0, l2, jnp.inf)
 
-    def lane(x, y, wl, wc2l):
+    def lane(y, wl, wc2l, x):
         """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
         keep = wl > 0
         pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
@@ -61,16 +74,27 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
         l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
         return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
 
-    if inp.shared:  # one design, one factorisation, nb right-hand sides
-        w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)  # (1, n)
-        tr, coef, l2, rank, cond, n_act, n_used = lane(var_fn(inp.u, inp.v), values, w[0], wc2[0])
+    def dense_shared():
+        x, w, wc2 = samples()
+        return lane(values, w[0], wc2[0], x)
+
+    if inp.shared and stream:  # the same, the design built block by block and never held
+        geo = _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg) if geometry is None \
+            else geometry
+        tr, coef, l2, rank, cond, n_act, n_used = streamed_lane(
+            geo, values, active, max_degree=max_degree, basis=basis, interactions=interactions, rcond=rcond,
+            dense=dense_shared,
+        )
+    if inp.shared and not stream:  # one design, one factorisation, nb right-hand sides
+        tr, coef, l2, rank, cond, n_act, n_used = dense_shared()
+    if inp.shared:
         tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
         rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
         n_used = jnp.broadcast_to(n_used, (n_deg, nb))
     else:  # groups of r lanes, each group with its own samples
         n_groups = inp.groups
         r = nb // n_groups
-        x_shared = None if inp.lane_directions else var_fn(inp.u, inp.v)
+        x_shared = None if inp.lane_directions else var_fn(u, v)
 
         # per-group arrays are mapped over; (1, n) weights or masks (per-lane directions only) are shared
         mapped = {"y": values.reshape(n_groups, r, -1)}
@@ -81,13 +105,12 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
             mapped.update(u=inp.u, v=inp.v)
 
         def group(a):
-            ul, vl = (a["u"], a["v"]) if inp.lane_directions else (inp.u, inp.v)
+            ul, vl = (a["u"], a["v"]) if inp.lane_directions else (u, v)
             x = var_fn(ul, vl) if inp.lane_directions else x_shared
             wg, wc2g = fit_weights(ul, vl, a.get("w", inp.weights[0]), a.get("m", inp.mask[0]), cutoff_deg)
-            return lane(x, a["y"], wg, wc2g)
+            return lane(a["y"], wg, wc2g, x)
 
-        args = mapped
-        tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, args, batch_size=max(1, lane_block // r))
+        tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, mapped, batch_size=max(1, lane_block // r))
         # (G, D, r, ...) -> lane axis (G r) after the degree axis
         coef = jnp.swapaxes(coef, 0, 1).reshape((n_deg, nb) + coef.shape[3:])
         l2 = jnp.swapaxes(l2, 0, 1).reshape(n_deg, nb)
@@ -102,12 +125,53 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
-    return dict(
+    out = dict(
         coefficients=coef.astype(values.dtype),
         degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
         mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
         n_used=n_used.astype(jnp.int32), status=status,
     )
+    if batch is None:  # a sharded fit's block of lanes: (D, B_local, ...), reshaped outside the shard_map
+        return out
+    lead = () if scalar else (n_deg,)  # (D, B, ...) -> (D?, *batch, ...) inside the program: no eager reshapes
+    return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
+
+
+def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
+    x = get_variables(variables).fn(inp.u, inp.v)
+    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
+    return stream_geometry(x, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions)
+
+
+@functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))
+def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions, cutoff_deg):
+    """The values-independent half of a streamed fit (:func:`polyjax._stream.stream_geometry`), compiled alone."""
+    k = get_variables(variables).k
+    active = jnp.asarray(term_degrees(k, max_degree, interactions))[None, :] <= degrees[:, None]
+    return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
+
+
+_GEOMETRY_MEMO: dict = {}
+
+
+def _streamed_geometry(inp, degrees, **static):
+    """The geometry of a streamed fit, remembered for the next fit on the same samples (the same direction arrays
+    by identity, equal weights and mask, the same options): one entry, the last one."""
+    key = (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
+    hit = _GEOMETRY_MEMO.get("last")
+    w, m = np.asarray(inp.weights), np.asarray(inp.mask)
+    if (hit is not None and hit["key"] == key and hit["u"]() is inp.u and hit["v"]() is inp.v
+            and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
+        return hit["geo"]
+    geo = _geometry_kernel(inp, np.asarray(degrees, np.int32), **static)
+    if not is_concrete(geo):
+        return geo
+    try:
+        _GEOMETRY_MEMO["last"] = dict(key=key, u=weakref.ref(inp.u), v=weakref.ref(inp.v), w=w.copy(), m=m.copy(),
+                                      geo=geo)
+    except TypeError:  # arrays without weak references: not remembered
+        _GEOMETRY_MEMO.pop("last", None)
+    return geo
 
 
 def _check_options(basis, method, rank_deficient, degree):
@@ -141,6 +205,9 @@ def fit_polynomial(
     nonfinite: str = "error",
     throw: bool = False,
     lane_block: int = LANE_BLOCK,
+    link: str = "identity",
+    eps: float = 1e-3,
+    steps: int = 3,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
 
@@ -189,6 +256,10 @@ def fit_polynomial(
            directions): a :func:`jax.lax.map` over blocks of lanes, ``vmap`` inside a block, so memory grows with
            the block (about ``lane_block * n * m`` floats), not with the batch. Same results for any block size.
 
+        link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
+           weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
+           is equation (3) itself.
+
     Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
     e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
     (:func:`jax.shard_map`), and the result comes back sharded the same way (``docs/scale.md``).
@@ -197,6 +268,14 @@ def fit_polynomial(
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
         degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.Result` codes.
     """
+    if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_logfit.py
+        if link != "log" or nonfinite != "error":
+            raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
+        from ._logfit import fit_log_polynomial
+
+        return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
+                                  cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
+                                  rcond=rcond, rank_deficient=rank_deficient)
     if isinstance(u, Measurements) and isinstance(v, str):
         u, v, variables = u, None, v
     vs = get_variables(variables)
@@ -210,16 +289,22 @@ def fit_polynomial(
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
-    kernel = functools.partial(_fit_kernel, variables=vs.name, max_degree=max_degree, basis=basis,
-                               interactions=bool(interactions), method=method, rcond=rcond, cutoff_deg=cutoff,
-                               lane_block=int(lane_block))
-    if sharded is None:
-        out = kernel(inp, jnp.asarray(degrees, jnp.int32))
-    else:  # each device fits its own lanes; the result stays sharded (polyjax/_sharding.py)
-        out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))
     scalar = np.ndim(degree) == 0
-    lead = () if scalar else (degrees.size,)
-    out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
+    static = dict(variables=vs.name, max_degree=max_degree, basis=basis, interactions=bool(interactions),
+                  cutoff_deg=cutoff)
+    if sharded is None:
+        # streamed only on the shared design (one set of samples for every lane, never per-lane directions)
+        stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
+                            is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
+        geometry = _streamed_geometry(inp, degrees, **static) if stream else None
+        out = _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch,
+                          scalar=scalar, stream=stream, geometry=geometry, lane_block=int(lane_block), **static)
+    else:  # each device fits its own lanes, dense; the result stays sharded (polyjax/_sharding.py)
+        kernel = functools.partial(_fit_kernel, method=method, rcond=rcond, batch=None, scalar=False, stream=False,
+                                   lane_block=int(lane_block), **static)
+        out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))
+        lead = () if scalar else (degrees.size,)
+        out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
     model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
                            max_degree=max_degree)
     if throw or rank_deficient == "error":

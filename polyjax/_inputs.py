@@ -28,6 +28,9 @@ inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the ho
 
 from __future__ import annotations
 
+import functools
+import weakref
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -151,13 +154,23 @@ def _lane_shape_error(name: str, found, n: int, batch) -> InputError:
     return InputError(f"{name}: expected shape {want} (samples last, n = len(u) = {n}), found {tuple(found)}")
 
 
+def _holds(flag, default: bool = False) -> bool:
+    """``bool(flag)`` when it is concrete, else ``default``: concrete arrays closed over inside a trace (``jit``)
+    give traced results, on which nothing can be decided."""
+    return bool(flag) if is_concrete(flag) else default
+
+
 def _check_directions(u, v, concrete: bool, lane_directions: bool = False) -> int:
     for name, w in (("u", u), ("v", v)):
         if (w.ndim != 2 and not (lane_directions and w.ndim > 2)) or w.shape[-1] != 3:
             want = "(n, 3) or (*batch, n, 3)" if lane_directions else "(n, 3)"
             raise InputError(f"{name}: expected directions of shape {want}, found {w.shape}")
         # a reduction on the device(s): a sharded input is never gathered to the host
-        if concrete and not bool(jnp.all(jnp.isfinite(w))):
+        # (inside a trace, where the reduction of a closed-over concrete array is traced: on the host)
+        if concrete:
+            finite = jnp.all(jnp.isfinite(w))
+            finite = bool(finite) if is_concrete(finite) else bool(np.all(np.isfinite(np.asarray(w))))
+        if concrete and not finite:
             raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
     if u.shape != v.shape:
         raise InputError(f"u and v: expected the same shape, found {u.shape} and {v.shape}")
@@ -167,15 +180,73 @@ def _check_directions(u, v, concrete: bool, lane_directions: bool = False) -> in
 def _lane_array(name, a, n, batch, dtype, dbatch=None):
     """``weights``/``mask`` as ``(1, n)`` (shared) or ``(G, n)``; the shape rule of the module."""
     a = jnp.asarray(a, dtype)
+    if dbatch is None:  # one set of directions: flattened to (1, n) / (B, n) inside the compiled _prepare_core
+        if a.shape == (n,) or tuple(a.shape) == tuple(batch) + (n,):
+            return a
+        raise _lane_shape_error(name, a.shape, n, batch)
     if a.shape == (n,):
         return a[None]
-    group = tuple(batch) if dbatch is None else tuple(dbatch)
+    group = tuple(dbatch)
     if tuple(a.shape) == group + (n,):
         return a.reshape(-1, n)
-    if dbatch is not None:
+    if group != tuple(batch):
         raise InputError(f"{name}: expected shape ({n},) or {group + (n,)} (one row per set of directions; samples "
                          f"last, n = {n}), found {tuple(a.shape)}")
     raise _lane_shape_error(name, a.shape, n, batch)
+
+
+@jax.jit
+def _normalize_pair(u, v):
+    u, ok_u = safe_normalize(u)
+    v, ok_v = safe_normalize(v)
+    return u, v, ok_u & ok_v
+
+
+_UNIT_MEMO: dict = {}
+
+
+def _unit_directions(u, v):
+    """Unit ``u``, ``v`` and where both have a direction. The last concrete pair is remembered by identity: the
+    loaders hand out the same device arrays for a shared grid (every MERL ``.binary`` file), whose million
+    directions are then normalised once, not once per fit."""
+    if not is_concrete(u, v):
+        return _normalize_pair(u, v)
+    hit = _UNIT_MEMO.get("pair")
+    if hit is not None and hit[0]() is u and hit[1]() is v:
+        return hit[2]
+    out = _normalize_pair(u, v)
+    if not is_concrete(out):  # concrete arrays closed over inside a trace give traced results: never kept
+        return out
+    try:
+        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), out)
+    except TypeError:  # an array type without weak references: not remembered
+        _UNIT_MEMO.pop("pair", None)
+    return out
+
+
+@functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))
+def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
+    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks."""
+    n = values.shape[-1]
+    y = values.reshape(-1, n)
+    nb = y.shape[0]
+    w = jnp.ones((1, n), y.dtype) if w is None else w.reshape(-1, n)
+    m = jnp.ones((1, n), bool) if m is None else m.reshape(-1, n)
+    w_bad = ~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)
+    m = m & ok[None]
+    finite = jnp.isfinite(y)
+    bad = m & ~finite  # (B, n)
+    any_bad = jnp.any(bad)
+    if nonfinite == "mask":
+        m = m & finite
+        lane_bad = jnp.zeros((nb,), bool)
+    else:
+        lane_bad = jnp.any(bad, axis=-1)
+    if not shared:
+        w = jnp.broadcast_to(w, (nb, n))
+        m = jnp.broadcast_to(m, (nb, n))
+    y = jnp.where(finite, y, 0.0)
+    return u, v, y, w, m, lane_bad, w_bad, any_bad
 
 
 def prepare_inputs(
@@ -206,51 +277,67 @@ def prepare_inputs(
                          f"{values.shape}")
     batch = tuple(values.shape[:-1])
     nb = int(np.prod(batch)) if batch else 1
+    if u.ndim > 2:  # per-lane directions: groups of lanes, each with its own samples (never the shared design)
+        return _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfinite), cutoff
+    w = None if weights is None else _lane_array("weights", weights, n, batch, dtype)
+    m = None if mask is None else _lane_array("mask", mask, n, batch, bool)
+    shared = (w is None or w.ndim == 1) and (m is None or m.ndim == 1) and (nonfinite == "error" or nb == 1)
+    # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
+    # in every process: most of a warm `polyjax fit`)
+    u, v, ok = _unit_directions(u, v)
+    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, ok, values, w, m, nonfinite=nonfinite,
+                                                            shared=shared)
+    if is_concrete(w_bad) and bool(w_bad):
+        raise InputError("weights: expected finite, non-negative solid-angle weights")
+    if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):
+        bad = np.asarray(m) & ~np.isfinite(np.asarray(values).reshape(nb, n))
+        _raise_nonfinite(bad, values)
+    return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared), cutoff
+
+
+def _raise_nonfinite(bad, values):
+    where = np.argwhere(np.asarray(bad).reshape(values.shape))
+    raise InputError(
+        f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
+        f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
+    )
+
+
+def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfinite) -> PreparedInputs:
+    """:func:`prepare_inputs` for directions ``(*dbatch, n, 3)``: ``G = prod(dbatch)`` groups of lanes."""
+    nb = int(np.prod(batch)) if batch else 1
     dbatch = tuple(u.shape[:-2])
-    per_lane_dirs = u.ndim > 2
-    if per_lane_dirs and batch[: len(dbatch)] != dbatch:
+    if batch[: len(dbatch)] != dbatch:
         raise InputError(f"u, v: expected per-lane directions of shape (*batch, n, 3) with batch a leading part of "
                          f"values' batch shape {batch} (values {values.shape}), found {u.shape}")
-    n_groups = int(np.prod(dbatch)) if per_lane_dirs else nb
+    n_groups = int(np.prod(dbatch))
     y = values.reshape(nb, n)
-    lane_shape = dbatch if per_lane_dirs and dbatch != batch else None
-    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype, lane_shape)
-    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, lane_shape)
-    if is_concrete(w) and (not bool(jnp.all(jnp.isfinite(w))) or bool(jnp.any(w < 0))):
+    w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype, dbatch)
+    m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, dbatch)
+    if is_concrete(w) and _holds(~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    if per_lane_dirs:
-        u, v = u.reshape(n_groups, n, 3), v.reshape(n_groups, n, 3)
+    u, v = u.reshape(n_groups, n, 3), v.reshape(n_groups, n, 3)
     u, ok_u = safe_normalize(u)
     v, ok_v = safe_normalize(v)
-    ok = ok_u & ok_v
-    m = m & (ok if per_lane_dirs else ok[None])
+    m = m & (ok_u & ok_v)
     finite = jnp.isfinite(y)
     r = nb // n_groups
     m_lanes = jnp.repeat(m, r, axis=0) if m.shape[0] > 1 and r > 1 else m
     bad = m_lanes & ~finite  # (B, n)
-    if nonfinite == "error" and is_concrete(y, m) and bool(jnp.any(bad)):
-        where = np.argwhere(np.asarray(bad).reshape(values.shape))
-        raise InputError(
-            f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
-            f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
-        )
-    shared = (not per_lane_dirs and w.shape[0] == 1 and m.shape[0] == 1
-              and (nonfinite == "error" or nb == 1))
+    if nonfinite == "error" and is_concrete(y, m) and _holds(jnp.any(bad)):
+        _raise_nonfinite(bad, values)
     if nonfinite == "mask":
         finite_group = jnp.all(finite.reshape(n_groups, -1, n), axis=1)
-        if per_lane_dirs and n_groups != nb and is_concrete(y) and not bool(jnp.all(
-                finite_group == jnp.any(finite.reshape(n_groups, -1, n), axis=1))):
+        if n_groups != nb and is_concrete(y) and not _holds(jnp.all(
+                finite_group == jnp.any(finite.reshape(n_groups, -1, n), axis=1)), default=True):
             raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
                              f"{tuple(dbatch) + (n, 3)}) needs NaN/inf at the same samples in every lane of a group")
         m = m & (finite if n_groups == nb else finite_group)
         lane_bad = jnp.zeros((nb,), bool)
     else:
         lane_bad = jnp.any(bad, axis=-1)
-    if not shared and not per_lane_dirs:
-        w = jnp.broadcast_to(w, (n_groups, n))
-        m = jnp.broadcast_to(m, (n_groups, n))
     y = jnp.where(finite, y, 0.0)
-    return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared, per_lane_dirs), cutoff
+    return PreparedInputs(u, v, y, w, m, lane_bad, batch, False, True)
 
 
 #: a design of more than this many bytes is refused up front (it would not fit in memory on common machines)

@@ -63,11 +63,14 @@ def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, statu
     def to_arrays(model):
         return {k: getattr(model, k) for k in static}, {k: np.asarray(getattr(model, k)) for k in arrays}
 
+    # static fields with a default (added after files were written, e.g. PolynomialBRDF.link) may be absent
+    defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
+
     def from_arrays(meta, arrs):
-        missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta]
+        missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta and k not in defaults]
         if missing:
             raise KeyError(f"missing fields {missing}")
-        return cls(**{k: jnp.asarray(arrs[k]) for k in arrays}, **{k: meta[k] for k in static})
+        return cls(**{k: jnp.asarray(arrs[k]) for k in arrays}, **{k: meta.get(k, defaults.get(k)) for k in static})
 
     return ModelKind(kind=kind, type=cls, to_arrays=to_arrays, from_arrays=from_arrays, models=tuple(models), fit=fit,
                      status_names=tuple(status_names))

@@ -158,6 +158,19 @@ def _factor(design, y2, weights, act, method, rcond):
     else:
         uu, s, vt = svd(a)
         utb = uu.T @ b
+    out, aux = _solve_svd(uu, s, vt, utb, scale, act, n, rcond)
+    aux.update(pos=pos, raw_scale=raw_scale)
+    return out, aux
+
+
+def _solve_svd(uu, s, vt, utb, scale, act, n, rcond):
+    """Minimum-norm coefficients, rank and condition from the SVD ``U S V^T`` of ``R`` (or of ``A``) and ``U^T b``.
+
+    Shared by the dense solve above and the streamed fit (:mod:`polyjax._stream`), which builds ``R`` and
+    ``Q^T b`` without ever holding the design.
+    """
+    m = vt.shape[0]
+    dtype = vt.dtype
     eps = jnp.finfo(dtype).eps
     tol = (eps * max(m, n**0.5) if rcond is None else rcond) * s[0]
     nonzero = s > tol
@@ -171,8 +184,7 @@ def _factor(design, y2, weights, act, method, rcond):
     full = (rank >= n_active) & (s_min > 0)
     condition = jnp.where(full, s[0] / jnp.where(s_min > 0, s_min, 1.0), jnp.inf)
     out = (coef, rank, condition, s, n_active)
-    aux = {"pos": pos, "scale": scale, "raw_scale": raw_scale, "vt": vt, "inv_s": inv_s, "nonzero": nonzero,
-           "i_min": i_min, "full": full}
+    aux = {"scale": scale, "vt": vt, "inv_s": inv_s, "nonzero": nonzero, "i_min": i_min, "full": full}
     return out, aux
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -87,6 +90,12 @@ def l2_error(
     values = jnp.asarray(values)
     predicted = jnp.asarray(predicted)
     _check_l2_shapes(values, predicted, jnp.shape(u), jnp.shape(v), weights, mask)
+    return _l2_core(values, predicted, jnp.asarray(u), jnp.asarray(v), weights, mask, cutoff_deg=cutoff_deg)
+
+
+@functools.partial(jax.jit, static_argnames=("cutoff_deg",))
+def _l2_core(values, predicted, u, v, weights, mask, *, cutoff_deg):
+    """Equation (11) in one compiled program (op by op it was about twenty, each lowered anew in every process)."""
     w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)
     r = jnp.where(wc2 > 0, values - predicted, 0.0)
     num = jnp.sum(wc2 * r * r, axis=-1)

@@ -38,6 +38,8 @@ class PolynomialBRDF(eqx.Module):
         n_used: samples that entered the fit.
         status: :class:`polyjax.Result` codes (``RESULTS`` has their messages).
         variables, basis, interactions, max_degree: static description of the model family.
+        link, eps: ``"identity"`` (equation (3) itself, the default) or ``"log"``: the model is then
+            ``f = exp(poly) - eps``, the polynomial fitted in log space (:func:`polyjax.fit_log_polynomial`).
     """
 
     coefficients: Float[Array, "*batch m"]
@@ -55,6 +57,8 @@ class PolynomialBRDF(eqx.Module):
     basis: str = eqx.field(static=True)
     interactions: bool = eqx.field(static=True)
     max_degree: int = eqx.field(static=True)
+    link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._logfit)
+    eps: float = eqx.field(static=True, default=0.0)
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
@@ -68,6 +72,8 @@ class PolynomialBRDF(eqx.Module):
     def n_params(self) -> Int[Array, "*batch"]:
         """Number of parameters of each lane: ``k p + 1`` (or ``C(k+p, p)`` with interactions)."""
         table = np.array([n_terms(self.k, p, self.interactions) for p in range(self.max_degree + 1)])
+        if not isinstance(self.degree, jax.core.Tracer):  # no compiled program for a table look-up
+            return table[np.asarray(self.degree)]
         return jnp.asarray(table)[self.degree]
 
     @property
@@ -118,6 +124,8 @@ class PolynomialBRDF(eqx.Module):
             flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
             out = jax.vmap(lambda p: self._lane(p, x))(flat)
             out = out.reshape(self.batch_shape + out.shape[1:])
+        if self.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
+            out = jnp.exp(out) - self.eps
         return jnp.where(above, out, 0.0)
 
     def paper_coefficients(self) -> np.ndarray:

@@ -10,7 +10,19 @@ name                        variables                                  k     rec
 ``ashikhmin-shirley``       n.h, v.h, max(n.u, n.v)         (eq. 9)    3     yes
 ``lafortune``               ux vx + uy vy, uz vz             (sec 3.3)  2     yes
 ``lafortune-anisotropic``   ux vx, uy vy, uz vz              (eq. 10)   3     yes
+``rusinkiewicz``            theta_h, theta_d                           2     yes
+``rusinkiewicz-phid``       theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  3  yes
 ==========================  =========================================  ====  ==========
+
+The Rusinkiewicz half/difference angles (Rusinkiewicz 1998) are the coordinates measured BRDFs
+(MERL) are tabulated in: ``theta_h`` the polar angle of ``h``, ``theta_d`` the angle between ``u``
+and ``h``, ``phi_d`` the azimuth of ``u`` about ``h`` in the frame where ``phi_h = 0``. Swapping
+``u`` and ``v`` sends ``phi_d`` to ``phi_d + pi``, so ``phi_d`` enters as
+``sin^2(theta_d) cos(2 phi_d) = d_x^2 - d_y^2``: reciprocal, even in ``phi_d`` (isotropic), smooth
+where ``phi_d`` is undefined (``theta_d = 0``). The three variables describe every isotropic BRDF;
+an anisotropic one would also need ``phi_h``. Angles are computed as ``atan2`` of a guarded norm
+and a cosine (never ``arccos``), so values and gradients stay finite at ``theta = 0``; at
+``theta_h = 0`` (``h = n``, ``phi_h`` undefined) ``phi_h = 0`` is used.
 
 ``h = (u + v)/|u + v|`` is the half vector; ``v.h = u.h``, so every built-in set is symmetric
 in ``u`` and ``v`` and the fitted model is reciprocal. Users can add their own set with
@@ -72,13 +84,49 @@ def _lafortune_anisotropic(u, v):
     return u * v
 
 
+def _safe_norm(a):
+    """``|a|`` over the last axis with a finite (zero) gradient at ``a = 0``."""
+    r2 = jnp.sum(a * a, axis=-1)
+    pos = r2 > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, r2, 1.0)), 0.0)
+
+
+def _half_difference(u, v):
+    """``theta_h``, ``theta_d`` and the difference vector ``d`` (``u`` in the frame of ``h`` with ``phi_h = 0``)."""
+    h = half_vector(u, v)
+    rh = _safe_norm(h[..., :2])
+    theta_h = jnp.arctan2(rh, h[..., 2])
+    theta_d = jnp.arctan2(_safe_norm(jnp.cross(u, h)), jnp.sum(u * h, axis=-1))
+    pole = rh <= 0
+    rs = jnp.where(pole, 1.0, rh)
+    cos_p, sin_p = jnp.where(pole, 1.0, h[..., 0] / rs), jnp.where(pole, 0.0, h[..., 1] / rs)
+    x = cos_p * u[..., 0] + sin_p * u[..., 1]  # d = R_y(-theta_h) R_z(-phi_h) u
+    y = -sin_p * u[..., 0] + cos_p * u[..., 1]
+    dx = x * h[..., 2] - u[..., 2] * rh
+    return theta_h, theta_d, dx, y
+
+
+def _rusinkiewicz(u, v):
+    theta_h, theta_d, _, _ = _half_difference(u, v)
+    return jnp.stack([theta_h, theta_d], axis=-1)
+
+
+def _rusinkiewicz_phid(u, v):
+    theta_h, theta_d, dx, dy = _half_difference(u, v)
+    return jnp.stack([theta_h, theta_d, dx * dx - dy * dy], axis=-1)
+
+
 _REGISTRY: dict[str, VariableSet] = {}
 _ALIASES = {"as": "ashikhmin-shirley", "ashikhmin": "ashikhmin-shirley", "laf": "lafortune"}
 
 
+def _register_builtin(name: str, fn: VariableFn, k: int, description: str) -> None:
+    """A built-in set, symmetric by construction (tested): registered without running JAX on import."""
+    _REGISTRY[name] = VariableSet(name, fn, k, True, description)
+
+
 def register_variables(
-    name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False,
-    _check: bool = True,
+    name: str, fn: VariableFn, k: int, *, symmetric: bool = False, description: str = "", overwrite: bool = False
 ) -> VariableSet:
     """Register a set of explanatory variables under ``name``.
 
@@ -98,10 +146,6 @@ def register_variables(
         raise InputError(f"variables {name!r}: a set of that name exists (pass overwrite=True to replace it)")
     if int(k) < 1:
         raise InputError(f"k: expected a positive number of variables, found {k}")
-    vs = VariableSet(key, fn, int(k), bool(symmetric), description)
-    if not _check:  # the built-in sets: no computation at import (jax.distributed.initialize must come first)
-        _REGISTRY[key] = vs
-        return vs
     import numpy as np
 
     rng = np.random.default_rng(0)
@@ -110,12 +154,14 @@ def register_variables(
     w /= np.linalg.norm(w, axis=-1, keepdims=True)
     out = jnp.asarray(fn(jnp.asarray(w[0]), jnp.asarray(w[1])))
     if out.shape != (8, int(k)):
-        raise InputError(f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned "
-                         f"{out.shape}")
+        raise InputError(
+            f"variables {name!r}: fn(u, v) for u, v of shape (8, 3) should return (8, {k}), returned {out.shape}"
+        )
     if symmetric:
         swapped = jnp.asarray(fn(jnp.asarray(w[1]), jnp.asarray(w[0])))
         if not bool(jnp.allclose(out, swapped, rtol=1e-5, atol=1e-6)):
             raise InputError(f"variables {name!r}: declared symmetric but fn(u, v) != fn(v, u)")
+    vs = VariableSet(key, fn, int(k), bool(symmetric), description)
     _REGISTRY[key] = vs
     return vs
 
@@ -142,10 +188,10 @@ def explanatory_variables(name: str, u, v) -> Float[Array, "... k"]:
     return get_variables(name).fn(jnp.asarray(u), jnp.asarray(v))
 
 
-register_variables("ward", _ward, 2, symmetric=True, description="n.h, (n.u)(n.v)  [paper sec. 3.1]", _check=False)
-register_variables("ashikhmin-shirley", _ashikhmin_shirley, 3, symmetric=True,
-                   description="n.h, v.h, max(n.u, n.v)  [paper eq. (9)]", _check=False)
-register_variables("lafortune", _lafortune, 2, symmetric=True, description="ux vx + uy vy, uz vz  [paper sec. 3.3]",
-                   _check=False)
-register_variables("lafortune-anisotropic", _lafortune_anisotropic, 3, symmetric=True,
-                   description="ux vx, uy vy, uz vz  [paper eq. (10)]", _check=False)
+_register_builtin("ward", _ward, 2, "n.h, (n.u)(n.v)  [paper sec. 3.1]")
+_register_builtin("ashikhmin-shirley", _ashikhmin_shirley, 3, "n.h, v.h, max(n.u, n.v)  [paper eq. (9)]")
+_register_builtin("lafortune", _lafortune, 2, "ux vx + uy vy, uz vz  [paper sec. 3.3]")
+_register_builtin("lafortune-anisotropic", _lafortune_anisotropic, 3, "ux vx, uy vy, uz vz  [paper eq. (10)]")
+_register_builtin("rusinkiewicz", _rusinkiewicz, 2, "theta_h, theta_d  [Rusinkiewicz 1998]")
+_register_builtin("rusinkiewicz-phid", _rusinkiewicz_phid, 3,
+                  "theta_h, theta_d, sin^2(theta_d) cos(2 phi_d)  [Rusinkiewicz 1998]")

@@ -55,7 +55,14 @@ def baseline_params(name: str):
     """Known constrained parameters of a baseline model (a 55-term ramp for Zernike)."""
     if name == "zernike":
         return jnp.linspace(-1.0, 1.0, bl.n_zernike_terms(8))
-    return jnp.asarray(TRUE_PARAMS[name])
+    return jnp.asarray(TRUE_PARAMS[name] if name in TRUE_PARAMS else PUBLISHED_LIKE[name])
+
+
+#: Parameters of the published compact models, typical of their MERL fits (``kap`` folded into ``rho_s``).
+PUBLISHED_LIKE = {
+    "sgd": [0.2, 3.0, 0.02, 0.45, 0.06, -0.02, 3.0, 1e-5, 25.0, 0.25],
+    "abc": [0.1, 20.0, 5e4, 1.2, 1.8],
+}
 
 
 def baseline_fit_at(name: str, params) -> bl.BaselineFit:

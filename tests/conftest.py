@@ -10,6 +10,9 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
+# the command line turns JAX's persistent compilation cache on; tests that call it in-process must not write into
+# the user's cache folder (tests of the cache set their own folder)
+os.environ.setdefault("POLYJAX_CACHE", "off")
 
 # the repository root, for the reference fits and the paper's numbers shared with the benchmarks
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -11,7 +11,8 @@ from polyjax._cli import main
 
 @pytest.mark.data
 def test_fit_json_matches_api(capsys, data_root):
-    assert main(["fit", "--data-root", str(data_root), "--sample", "25", "--variables", "lafortune", "--degree", "7", "--json"]) == 0
+    assert main(["fit", "--data-root", str(data_root), "--sample", "25", "--variables", "lafortune", "--degree", "7",
+                 "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     d = pj.data.load_curet(data_root, [25])
     m = pj.fit_polynomial(d, variables="lafortune", degree=7)

@@ -4,10 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from _data_problems import SMALL_RES, write_astm, write_small_merl
 
 import polyjax as pj
 from polyjax._cli import build_parser, main
+
+from _data_problems import SMALL_RES, write_astm, write_small_merl
 
 
 @pytest.fixture()
@@ -154,7 +155,8 @@ def test_fit_report_warns_when_fit_barely_beats_zero(tmp_path, capsys):
 
 @pytest.mark.data
 def test_fit_report_warns_on_cornell_cayman(capsys, data_root):
-    """Cayman's narrow peak: the Lafortune polynomial removes < 0.1% of the zero model's L2 at p = 1 (2.812 vs 2.814)."""
+    """Cayman's narrow peak: the Lafortune polynomial removes < 0.1% of the zero model's L2 at p = 1 (2.812 vs
+    2.814)."""
     assert main(["fit", "--data-root", str(data_root), "--dataset", "cornell:cayman", "--degree", "1", "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
     ratio = np.asarray(js["l2"]) / np.asarray(js["l2_zero_model"])

@@ -5,7 +5,12 @@ import pytest
 
 import polyjax as pj
 from polyjax.data import (
-    EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, UnknownMaterialError, WrongFormatError,
+    EmptyFileError,
+    HeaderError,
+    NonFiniteValueError,
+    TruncatedFileError,
+    UnknownMaterialError,
+    WrongFormatError,
 )
 
 from _data_problems import write_astm

@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -285,8 +286,18 @@ def _mitsuba_samples_exact_chi2(brdf, view):
 @pytest.mark.data
 @pytest.mark.parametrize("view", [NORMAL, GRAZING], ids=["normal", "grazing"])
 def test_mitsuba_chi2_glossy_merl(view, tmp_path, monkeypatch):
+    """Mitsuba's BSDF adapter drops samples whose weight is 0, so its test expects no density where ``f`` is 0;
+    polyjax's sampler keeps a cosine floor, and the exported BSDF is clamped at 0 like every light transport. The
+    fit dips below 0 at grazing view, so it is lifted by a constant (Legendre term 0) above 0 for this check
+    (polyjax's own chi-square tests take the fit as it is)."""
     mi = _mitsuba("llvm_ad_rgb")
-    _mitsuba_chi2(mi, glossy_polynomial(), view, tmp_path, monkeypatch)
+    model = glossy_polynomial()
+    g = np.linspace(0.0, 1.0, 24)
+    th, ph = np.meshgrid(g * np.pi / 2, g * 2 * np.pi, indexing="ij")
+    d = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+    low = float(jnp.min(model(np.repeat(d, len(d), axis=0), np.tile(d, (len(d), 1)))))
+    model = eqx.tree_at(lambda m: m.coefficients, model, model.coefficients.at[..., 0].add(max(0.0, -low) + 1e-3))
+    _mitsuba_chi2(mi, model, view, tmp_path, monkeypatch)
 
 
 def test_mitsuba_sphere_matches_polyjax_render():
@@ -294,6 +305,7 @@ def test_mitsuba_sphere_matches_polyjax_render():
     (8 x 8 supersampled pixel centres, averaged). The mirrored image must not match (the check can fail)."""
     mi = _mitsuba("llvm_ad_rgb")
     import polyjax.render as pr
+
     from _render_problems import LIGHT_DIR, ortho_camera
 
     model = MODELS["lafortune"]

@@ -9,13 +9,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _problems import curet
-from _robust_problems import random_hemisphere
 from jax.test_util import check_grads
 
 import polyjax as pj
 from polyjax._linalg import eigh
 from polyjax._lstsq import TALL_ROWS
+
+from _problems import curet
+from _robust_problems import random_hemisphere
 
 FACTORISATIONS = ("qr", "svd", "eigh", "cholesky", "triangular_solve", "householder_product")
 

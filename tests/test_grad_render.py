@@ -227,7 +227,8 @@ def test_tabulated_values_built_inside_grad():
 
 
 def test_baseline_model_parameters():
-    """A baseline model (Cook-Torrance, ``f(params, u, v)``) through ParametricBRDF: derivatives w.r.t. its parameters."""
+    """A baseline model (Cook-Torrance, ``f(params, u, v)``) through ParametricBRDF: derivatives w.r.t. its
+    parameters."""
     baselines = pytest.importorskip("baselines")
 
     def scene(p):

@@ -42,7 +42,8 @@ def test_nan_values_error_by_default_and_mask_on_request(problem):
     u, v, b = problem
     bad = b.copy()
     bad[7] = np.nan
-    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 1 NaN/inf \(first at index \(7,\)\)"):
+    with pytest.raises(pj.InputError,
+                       match=r"values: expected finite numbers, found 1 NaN/inf \(first at index \(7,\)\)"):
         pj.fit_polynomial(u, v, bad)
     m = pj.fit_polynomial(u, v, bad, nonfinite="mask", degree=2, cutoff_deg=None)
     ref = pj.fit_polynomial(np.delete(u, 7, 0), np.delete(v, 7, 0), np.delete(b, 7), degree=2, cutoff_deg=None)

@@ -15,7 +15,10 @@ import polyjax.render as pr
 mi = pytest.importorskip("mitsuba")
 
 from polyjax.render._mitsuba import (  # noqa: E402
-    mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba,
+    mitsuba_bsdf_eval,
+    mitsuba_roughplastic,
+    mitsuba_scene_dict,
+    render_mitsuba,
 )
 
 SIZE = 128

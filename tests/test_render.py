@@ -6,7 +6,8 @@ import pytest
 
 import polyjax as pj
 import polyjax.render as pr
-from _render_problems import LIGHT_DIR, SIZE, lone_sphere, ortho_camera, sphere_normals, sphere_on_plane
+
+from _render_problems import LIGHT_DIR, lone_sphere, ortho_camera, sphere_normals, sphere_on_plane
 
 
 def test_lambertian_sphere_matches_cosine_law():

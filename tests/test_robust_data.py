@@ -71,7 +71,8 @@ def test_nan_and_inf_inside_values_error_names_the_argument_or_are_masked(proble
     vals = np.stack([b, b, b])
     vals[1, 7] = np.inf
     vals[2, 3] = np.nan
-    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 2 NaN/inf \(first at index \(1, 7\)\)"):
+    with pytest.raises(pj.InputError,
+                       match=r"values: expected finite numbers, found 2 NaN/inf \(first at index \(1, 7\)\)"):
         pj.fit_polynomial(u, v, vals)
     m = pj.fit_polynomial(u, v, vals, nonfinite="mask", degree=3)
     np.testing.assert_array_equal(np.asarray(m.n_used), [60, 59, 59])
@@ -94,6 +95,7 @@ def test_nan_under_outer_jit_flags_nonfinite_values_lane_only(problem):
     np.testing.assert_array_equal(np.asarray(m.status), [0, pj.FitStatus.NONFINITE_VALUES, 0])
     assert np.isinf(float(m.l2[1])) and np.all(np.asarray(m.coefficients[1]) == 0.0)
     ref = pj.fit_polynomial(u, v, np.stack([b, 2 * b]), degree=3)
-    np.testing.assert_allclose(np.asarray(m.coefficients[np.array([0, 2])]), np.asarray(ref.coefficients), rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(m.coefficients[np.array([0, 2])]), np.asarray(ref.coefficients),
+                               rtol=1e-10, atol=1e-13)
     masked = jax.jit(lambda u, v, y: pj.fit_polynomial(u, v, y, degree=3, nonfinite="mask"))(u, v, vals)
     assert np.all(np.asarray(masked.status) == pj.FitStatus.OK) and int(masked.n_used[1]) == 59

@@ -26,7 +26,8 @@ def test_component_constant_up_to_rounding_flagged_in_both_bases(retro, variable
     ~1e57 with status OK, and the model exploded off the u = v line. Now the component gets
     halfwidth inf (t = 0): RANK_DEFICIENT, coefficients O(1), both bases the same model everywhere."""
     u, b = retro
-    fits = {basis: pj.fit_polynomial(u, u, b, variables=variables, degree=4, basis=basis) for basis in ("legendre", "monomial")}
+    fits = {basis: pj.fit_polynomial(u, u, b, variables=variables, degree=4, basis=basis)
+            for basis in ("legendre", "monomial")}
     a, c = random_hemisphere(200, seed=5, min_cos=0.2)
     for m in fits.values():
         assert int(m.status) == pj.FitStatus.RANK_DEFICIENT and np.isinf(float(m.condition))
@@ -36,12 +37,14 @@ def test_component_constant_up_to_rounding_flagged_in_both_bases(retro, variable
         off = np.asarray(m(a, c))  # off the fitted u = v manifold: bounded, like the data
         assert np.all(np.isfinite(off)) and np.abs(off).max() < 10.0
         np.testing.assert_allclose(np.asarray(m(a, a)), 0.1 + a[:, 2] ** 3, atol=0.02)
-    np.testing.assert_allclose(np.asarray(fits["monomial"](a, c)), np.asarray(fits["legendre"](a, c)), rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(fits["monomial"](a, c)), np.asarray(fits["legendre"](a, c)),
+                               rtol=1e-7, atol=1e-9)
     # the paper's coefficients (equation (3) in the raw components) drop the constant component too
     m = fits["legendre"]
     z = (pj.explanatory_variables(variables, a, c) - m.mean) @ m.rotation
     beta = m.paper_coefficients()
-    np.testing.assert_allclose(np.asarray(pj.evaluate_paper_form(beta, z, 4)), np.asarray(m(a, c)), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(pj.evaluate_paper_form(beta, z, 4)), np.asarray(m(a, c)),
+                               rtol=1e-9, atol=1e-12)
 
 
 def test_constant_component_model_survives_save_and_load(retro, tmp_path):
@@ -68,7 +71,8 @@ def test_nan_under_outer_jit_flagged_whatever_the_mask(two_lanes, how):
     """nonfinite='error' under jit: the lane with NaN is NONFINITE_VALUES (L2 inf, coefficients 0),
     the other lane exact. With a mask or per-lane weights the NaN sample used to be dropped silently (OK)."""
     u, v, b, bad = two_lanes
-    extra = {"no mask": {}, "mask": {"mask": np.ones(b.shape, bool)}, "per-lane weights": {"weights": np.ones(b.shape)}}[how]
+    extra = {"no mask": {}, "mask": {"mask": np.ones(b.shape, bool)},
+             "per-lane weights": {"weights": np.ones(b.shape)}}[how]
     m = jax.jit(lambda vals: pj.fit_polynomial(u, v, vals, degree=3, **extra))(bad)
     np.testing.assert_array_equal(np.asarray(m.status), [pj.FitStatus.OK, pj.FitStatus.NONFINITE_VALUES])
     assert np.isinf(float(m.l2[1])) and np.all(np.asarray(m.coefficients[1]) == 0.0)
@@ -88,7 +92,8 @@ def test_nonfinite_mask_under_outer_jit_drops_the_sample(two_lanes):
 
 @pytest.mark.parametrize(
     "scale, dtype, valid",
-    [(1e200, np.float64, True), (1e30, np.float32, True), (1e-11, np.float64, True), (1e-13, np.float64, False), (0.0, np.float64, False)],
+    [(1e200, np.float64, True), (1e30, np.float32, True), (1e-11, np.float64, True), (1e-13, np.float64, False),
+     (0.0, np.float64, False)],
 )
 def test_safe_normalize_extreme_lengths(scale, dtype, valid):
     """Lengths whose square overflows (1e200; 1e30 in float32) are normalised, not turned into a

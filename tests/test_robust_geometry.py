@@ -8,7 +8,6 @@ vector has no direction and is masked (fit) or gives 0 (evaluation). The low-lev
 unit vectors as given.
 """
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -42,7 +41,8 @@ def test_polynomial_finite_at_degenerate_directions_and_zero_below_horizon(varia
 
 @pytest.mark.parametrize("variables", pj.variable_sets())
 def test_polynomial_fit_with_degenerate_samples_inside(variables, smooth_data):
-    """Degenerate pairs among the samples (no cutoff): below-horizon and 90-degree pairs dropped, the rest fitted finite."""
+    """Degenerate pairs among the samples (no cutoff): below-horizon and 90-degree pairs dropped, the rest fitted
+    finite."""
     u, v, b = smooth_data
     hu, hv, above = hard_directions()
     uu, vv = np.concatenate([u, hu]), np.concatenate([v, hv])

@@ -40,7 +40,8 @@ def test_fitting_c_times_b_gives_c_times_the_coefficients(log_c, negative):
     c = (-1.0 if negative else 1.0) * 10.0**log_c
     m = _fit(U, V, c * B)
     scale = abs(c) * np.max(np.abs(np.asarray(REF.coefficients)))
-    np.testing.assert_allclose(np.asarray(m.coefficients), c * np.asarray(REF.coefficients), rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(np.asarray(m.coefficients), c * np.asarray(REF.coefficients),
+                               rtol=1e-9, atol=1e-12 * scale)
     assert float(m.l2) == pytest.approx(abs(c) * float(REF.l2), rel=1e-8, abs=1e-14 * abs(c))
 
 

@@ -51,7 +51,8 @@ def test_duplicated_explanatory_variables_rank_drops_by_the_duplicate(problem):
     """ux vx == uy vy for every sample (directions on the diagonal plane): lafortune-anisotropic's
     first two variables coincide, one component has zero variance, rank 1 + 2p of 1 + 3p."""
     u, v, b = problem
-    diag = lambda w: np.stack([w[:, 0], w[:, 0], w[:, 2]], -1) / np.linalg.norm(np.stack([w[:, 0], w[:, 0], w[:, 2]], -1), axis=-1, keepdims=True)  # noqa: E731
+    diag = lambda w: (np.stack([w[:, 0], w[:, 0], w[:, 2]], -1)  # noqa: E731
+                      / np.linalg.norm(np.stack([w[:, 0], w[:, 0], w[:, 2]], -1), axis=-1, keepdims=True))
     ud, vd = diag(u), diag(v)
     p = 3
     m = pj.fit_polynomial(ud, vd, b, variables="lafortune-anisotropic", degree=p)
@@ -96,5 +97,6 @@ def test_error_names_the_first_bad_lane_and_its_own_counts(problem):
     mask[1, 5:] = False
     flagged = pj.fit_polynomial(u, v, values, degree=3, mask=mask, cutoff_deg=None)
     assert [int(s) for s in flagged.status] == [0, pj.FitStatus.RANK_DEFICIENT, 0]
-    with pytest.raises(pj.FitError, match=r"1 of 3 fits are rank-deficient \(first at batch index \(1,\): rank 5 of 7 parameters, 5 samples used"):
+    with pytest.raises(pj.FitError, match=r"1 of 3 fits are rank-deficient \(first at batch index \(1,\): "
+                                          r"rank 5 of 7 parameters, 5 samples used"):
         pj.fit_polynomial(u, v, values, degree=3, mask=mask, cutoff_deg=None, rank_deficient="error")

@@ -6,10 +6,20 @@ import numpy as np
 import pytest
 
 import polyjax.render as pr
-from _sampling_problems import (
-    GRAZING, NORMAL, OBLIQUE, TABLE, chi2_pvalue, cook_torrance, glossy_polynomial, neural, sample_many, ward,
-)
 from polyjax.render._sampling import cosine_sample, hemisphere_to_square, square_to_hemisphere
+
+from _sampling_problems import (
+    GRAZING,
+    NORMAL,
+    OBLIQUE,
+    TABLE,
+    chi2_pvalue,
+    cook_torrance,
+    glossy_polynomial,
+    neural,
+    sample_many,
+    ward,
+)
 
 N_SAMPLES = 200_000
 

@@ -9,12 +9,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _data_problems import write_small_merl
 
 import baselines
 import polyjax as pj
 import polyjax.render as pr
 from polyjax._cli import main
+
+from _data_problems import write_small_merl
 
 
 @pytest.fixture(scope="module")
@@ -150,9 +151,11 @@ def test_renderer_never_emits_negative_radiance():
 
     brdf = Negative(kd=0.1, ks=0.5, exponent=20.0)
     scene = pr.sphere_scene(24)
-    grid = np.asarray(pr.render_grid([[brdf, pr.Phong(kd=0.1, ks=0.5, exponent=20.0)]], scene, dtype=jnp.float64).images)
+    grid = np.asarray(pr.render_grid([[brdf, pr.Phong(kd=0.1, ks=0.5, exponent=20.0)]], scene,
+                                     dtype=jnp.float64).images)
     assert grid[0, 0].min() == 0.0 and grid[0, 0].max() > 0
-    clamped = np.asarray(pr.render(pr.Scene(scene.camera, [pr.Sphere(brdf)], list(scene.lights)), dtype=jnp.float64).image)
+    clamped = np.asarray(pr.render(pr.Scene(scene.camera, [pr.Sphere(brdf)], list(scene.lights)),
+                                   dtype=jnp.float64).image)
     assert clamped.min() == 0.0
     np.testing.assert_allclose(clamped, grid[0, 0], atol=1e-12)
     # where the BRDF is positive, the clamp changes nothing
@@ -163,7 +166,8 @@ def test_renderer_never_emits_negative_radiance():
 
 def test_fit_cli_fits_a_baseline_with_the_same_output_forms(tmp_path, capsys, rgb_data):
     path, d = rgb_data
-    assert main(["fit", "--model", "ward", "--dataset", f"merl:{path}", "--json", "--save", str(tmp_path / "w.npz")]) == 0
+    assert main(["fit", "--model", "ward", "--dataset", f"merl:{path}", "--json", "--save",
+                 str(tmp_path / "w.npz")]) == 0
     out = json.loads(capsys.readouterr().out)
     ref = baselines.fit("ward", d)
     assert out["model"] == "ward" and out["labels"] == ["paint R", "paint G", "paint B"]
@@ -206,7 +210,8 @@ def test_render_cli_renders_a_saved_baseline_fit(tmp_path, capsys, ward_fit, rgb
 
 def test_render_cli_model_flag_takes_a_baseline_name_like_fit(tmp_path, capsys, rgb_data):
     out = tmp_path / "img"
-    assert main(["render", "--model", "ward", "--dataset", f"merl:{rgb_data[0]}", "--size", "8", "--out", str(out)]) == 0
+    assert main(["render", "--model", "ward", "--dataset", f"merl:{rgb_data[0]}", "--size", "8", "--out",
+                 str(out)]) == 0
     assert "rows: ward; columns: paint" in capsys.readouterr().out
     assert main(["render", "--model", "nope", "--dataset", f"merl:{rgb_data[0]}", "--size", "8",
                  "--out", str(out)]) == 2

@@ -4,9 +4,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _problems import random_hemisphere
 
 import polyjax as pj
+
+from _problems import random_hemisphere
 
 
 @pytest.fixture(scope="module")

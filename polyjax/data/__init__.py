@@ -35,6 +35,7 @@ from ._errors import (
     UnknownMaterialError,
     WrongFormatError,
 )
+from ._load import load
 from ._merl import (
     MERL_N_BINS,
     MERL_NAMES,
@@ -62,7 +63,6 @@ from ._nbrdf import (
 )
 from ._synthetic import synthetic_default
 from ._tabulate import tabulate
-from ._load import load
 
 __all__ = [
     "DATA_ENV", "data_root", "has_data_root", "ANISOTROPIC_SAMPLES", "ISOTROPIC_52", "TABLE2_SAMPLES",
@@ -73,5 +73,6 @@ __all__ = [
     "WrongFormatError", "MERL_N_BINS", "MERL_NAMES", "MERL_RESOLUTION", "MERL_SCALE", "TABLE3_MATERIALS",
     "directions_to_rusinkiewicz", "load_merl_binary", "merl_bin_angles", "merl_bin_weights", "merl_grid",
     "merl_index", "read_merl_binary", "rusinkiewicz_to_directions", "write_merl_binary", "NeuralBRDF",
-    "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name", "tabulate",
+    "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name",
+    "tabulate",
 ]

@@ -69,7 +69,8 @@ def _cmf_at(wavelengths) -> np.ndarray:
     if wl.ndim != 1 or wl.size < 2 or np.any(np.diff(wl) <= 0):
         raise InputError(f"wavelengths: expected increasing nm values, found {wl}")
     if wl[0] < CMF_WAVELENGTHS[0] - 1e-9 or wl[-1] > CMF_WAVELENGTHS[-1] + 1e-9:
-        raise InputError(f"wavelengths: expected values within 400..700 nm (the embedded CIE table), found {wl[0]}..{wl[-1]}")
+        raise InputError(f"wavelengths: expected values within 400..700 nm (the embedded CIE table), "
+                         f"found {wl[0]}..{wl[-1]}")
     return np.stack([np.interp(wl, CMF_WAVELENGTHS, CIE1931_CMF[:, c]) for c in range(3)], axis=-1)
 
 
@@ -81,7 +82,8 @@ def spectral_to_xyz(spectra, wavelengths) -> np.ndarray:
     cmf = _cmf_at(wavelengths)
     s = np.asarray(spectra, dtype=np.float64)
     if s.shape[-1] != cmf.shape[0]:
-        raise InputError(f"spectra: expected {cmf.shape[0]} values per spectrum (one per wavelength), found {s.shape[-1]}")
+        raise InputError(f"spectra: expected {cmf.shape[0]} values per spectrum (one per wavelength), "
+                         f"found {s.shape[-1]}")
     return s @ cmf / cmf[:, 1].sum()
 
 

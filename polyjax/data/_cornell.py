@@ -35,7 +35,14 @@ from .._config import data_file
 from .._errors import InputError
 from .._measurements import Measurements, make_measurements
 from ._colour import spectral_to_luminance, spectral_to_rgb, spectral_to_xyz, xyz_to_rgb_matrix
-from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, UnknownMaterialError, WrongFormatError
+from ._errors import (
+    EmptyFileError,
+    HeaderError,
+    NonFiniteValueError,
+    TruncatedFileError,
+    UnknownMaterialError,
+    WrongFormatError,
+)
 
 #: Cornell materials below the data root (``cornell/<name>.brdf``).
 CORNELL_NAMES: tuple[str, ...] = ("cayman", "garnet_red", "acryl_blue")
@@ -69,7 +76,8 @@ def _check_finite(arr: np.ndarray, path: Path, what: str, rows=None) -> None:
     if bad.any():
         r, c = np.argwhere(bad)[0]
         where = f"record {r + 1}" if rows is None else f"line {rows[r]}"
-        raise NonFiniteValueError(path, f"finite {what}", f"{int(bad.sum())} NaN/inf values (first: {arr[r, c]} in {where}, column {c + 1})")
+        raise NonFiniteValueError(path, f"finite {what}",
+                                  f"{int(bad.sum())} NaN/inf values (first: {arr[r, c]} in {where}, column {c + 1})")
 
 
 def _check_angles(ang: np.ndarray, path: Path) -> None:
@@ -77,7 +85,8 @@ def _check_angles(ang: np.ndarray, path: Path) -> None:
     if np.any(th < -1e-6) or np.any(th > np.pi / 2 + 1e-3) or np.any(np.abs(ang[:, [1, 3]]) > 2 * np.pi + 1e-3):
         raise HeaderError(
             path, "angles in radians (theta in [0, pi/2], phi in [-2 pi, 2 pi])",
-            f"theta in [{th.min():.4g}, {th.max():.4g}], phi in [{ang[:, [1, 3]].min():.4g}, {ang[:, [1, 3]].max():.4g}]",
+            f"theta in [{th.min():.4g}, {th.max():.4g}], "
+            f"phi in [{ang[:, [1, 3]].min():.4g}, {ang[:, [1, 3]].max():.4g}]",
         )
 
 
@@ -122,7 +131,8 @@ def read_cornell_pbrt(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
         raise TruncatedFileError(path, f"records of {rec} numbers after the header", "no records")
     if rest.size % rec:
         raise TruncatedFileError(
-            path, f"records of {rec} numbers", f"{rest.size} numbers = {rest.size // rec} records + {rest.size % rec} left over"
+            path, f"records of {rec} numbers",
+            f"{rest.size} numbers = {rest.size // rec} records + {rest.size % rec} left over",
         )
     rows = rest.reshape(-1, rec)
     _check_finite(rows, path, "angles and BRDF values")
@@ -138,7 +148,8 @@ def _is_number(t: str) -> bool:
     return True
 
 
-def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians") -> tuple[np.ndarray, list[str], np.ndarray]:
+def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians"
+                      ) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Parse an ASTM E1392 BRDF text file (format in the module docstring).
 
     Returns:
@@ -172,11 +183,13 @@ def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians") -
                     raise HeaderError(path, "VARS with 4 angle columns and at least one value column", repr(s))
                 names = cols
             elif _is_number(s.replace(",", " ").split()[0]):
-                raise HeaderError(path, "a 'VARS ...' line naming the columns before the data", f"data on line {no} first")
+                raise HeaderError(path, "a 'VARS ...' line naming the columns before the data",
+                                  f"data on line {no} first")
             continue
         toks = [t for t in re.split(r"[,\s]+", s) if t]
         if len(toks) != len(names):
-            raise TruncatedFileError(path, f"{len(names)} columns per row ({', '.join(names)})", f"{len(toks)} on line {no}")
+            raise TruncatedFileError(path, f"{len(names)} columns per row ({', '.join(names)})",
+                                     f"{len(toks)} on line {no}")
         data_rows.append([_to_float(t, path, no, expected) for t in toks])
         row_lines.append(no)
     if names is None:
@@ -240,7 +253,8 @@ def _astm_channels(names, vals, channels: str, path) -> tuple[np.ndarray, tuple[
     if len(names) == 1:
         if channels == "luminance":
             return vals.T, (names[0],)
-        raise HeaderError(path, f"R,G,B / X,Y,Z / wavelength columns for channels={channels!r}", f"one column {names[0]!r}")
+        raise HeaderError(path, f"R,G,B / X,Y,Z / wavelength columns for channels={channels!r}",
+                          f"one column {names[0]!r}")
     raise HeaderError(path, "value columns R,G,B or X,Y,Z or <wavelength>nm,...", ",".join(names))
 
 
@@ -312,7 +326,8 @@ def load_cornell(
             ang, cols, raw = read_cornell_astm(path, angle_unit=angle_unit)
             vals, labs = _astm_channels(cols, raw, channels, path)
         if angles is not None and (ang.shape != angles.shape or not np.allclose(ang, angles)):
-            raise HeaderError(path, f"the same directions as {names[0]!r} to load them together", "different directions")
+            raise HeaderError(path, f"the same directions as {names[0]!r} to load them together",
+                              "different directions")
         if labels is not None and labs != labels:
             raise HeaderError(path, f"channels {labels}", f"{labs}")
         angles, labels = ang, labs

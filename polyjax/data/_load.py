@@ -49,7 +49,8 @@ def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measure
         return load_nbrdf_measurements(path, None if not names else names[0] if len(names) == 1 else names, **options)
     if kind in ("merl-nbrdf", "nbrdf", "merl_nbrdf"):
         if not items:
-            raise UnknownNameError(f"dataset {spec!r}: expected 'merl-nbrdf:<material>[,<material>...]', 'table3' or 'all'")
+            raise UnknownNameError(f"dataset {spec!r}: expected 'merl-nbrdf:<material>[,<material>...]', "
+                                   "'table3' or 'all'")
         return load_merl_nbrdf(items[0] if len(items) == 1 else items, root, **options)
     if kind == "cornell":
         if not items:

@@ -97,7 +97,9 @@ TABLE3_MATERIALS: tuple[str, ...] = (
 def _check_resolution(resolution) -> tuple[int, int, int]:
     res = tuple(int(r) for r in resolution)
     if len(res) != 3 or any(r <= 0 for r in res):
-        raise InputError(f"resolution: expected three positive bin counts (n_theta_h, n_theta_d, n_phi_d), found {resolution!r}")
+        raise InputError(
+            f"resolution: expected three positive bin counts (n_theta_h, n_theta_d, n_phi_d), found {resolution!r}"
+        )
     return res
 
 
@@ -218,12 +220,15 @@ _SIGNATURES = {b"\x89HDF": "an HDF5 file", b"PK\x03\x04": "a zip archive", b"\x8
                b"\x76\x2f\x31\x01": "an OpenEXR image"}
 
 
-def read_merl_binary(path: str | os.PathLike, *, scaled: bool = True) -> tuple[np.ndarray, tuple[int, int, int]]:
+def read_merl_binary(
+    path: str | os.PathLike, *, scaled: bool = True, copy: bool = True
+) -> tuple[np.ndarray, tuple[int, int, int]]:
     """Read a MERL ``.binary`` file completely and check it.
 
     Args:
         path: the file.
         scaled: multiply by :data:`MERL_SCALE` (BRDF in 1/sr); False returns the stored numbers.
+        copy: with ``scaled=False``, False returns a read-only view of the bytes read instead of a copy.
 
     Returns:
         ``(values, resolution)`` with ``values`` float64 ``(3, N_h N_d N_p)`` in file order
@@ -255,7 +260,8 @@ def read_merl_binary(path: str | os.PathLike, *, scaled: bool = True) -> tuple[n
     want = _HEADER_BYTES + 3 * 8 * n
     if len(data) < want:
         raise TruncatedFileError(
-            path, f"{want} bytes for the header {res} (3 x {n} float64)", f"{len(data)} bytes ({want - len(data)} missing)"
+            path, f"{want} bytes for the header {res} (3 x {n} float64)",
+            f"{len(data)} bytes ({want - len(data)} missing)",
         )
     if len(data) > want:
         raise HeaderError(path, f"{want} bytes for the header {res}", f"{len(data)} bytes ({len(data) - want} extra)")
@@ -269,8 +275,10 @@ def read_merl_binary(path: str | os.PathLike, *, scaled: bool = True) -> tuple[n
         )
     if scaled:
         values = raw * np.asarray(MERL_SCALE)[:, None]
-    else:
+    elif copy:
         values = raw.copy()
+    else:  # read-only view of the file's bytes (the loader gathers and scales the kept bins itself)
+        values = raw
     return values, res
 
 
@@ -302,7 +310,8 @@ def write_merl_binary(
     res = _check_resolution(resolution)
     n = int(np.prod(res))
     if vals.size != 3 * n or vals.shape[0] != 3:
-        raise InputError(f"values: expected shape (3, {n}) or (3, {res[0]}, {res[1]}, {res[2]}) for resolution {res}, found {vals.shape}")
+        raise InputError(f"values: expected shape (3, {n}) or (3, {res[0]}, {res[1]}, {res[2]}) for resolution "
+                         f"{res}, found {vals.shape}")
     vals = vals.reshape(3, n)
     bad = ~np.isfinite(vals)
     if mask is not None:
@@ -348,14 +357,17 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     return tuple(jnp.asarray(a[above], dtype_name) for a in (u, v, w))
 
 
-def _merl_measurements(values, valid, resolution, *, subsample, seed, names, source) -> Measurements:
-    """values ``(m, 3, N)`` with ``valid`` ``(m, 3, N)`` -> Measurements over the kept bins."""
+def _merl_measurements(values, valid, resolution, *, subsample, seed, names, source, scale=None) -> Measurements:
+    """values ``(m, 3, N)`` with ``valid`` ``(m, 3, N)`` -> Measurements over the kept bins; ``scale`` ``(3,)``
+    multiplies the kept values (the stored numbers of a ``.binary`` file are scaled after the gather)."""
     import jax.numpy as jnp
 
     u, v, w, above = merl_grid(tuple(resolution))
     keep = _choose_bins(above & valid.any(axis=(0, 1)), subsample, seed, source)
     vals = values[..., keep]
     mask = valid[..., keep]
+    if scale is not None:
+        vals *= np.asarray(scale)[:, None]
     single = vals.shape[0] == 1
     if single:
         vals, mask = vals[0], mask[0]
@@ -392,8 +404,8 @@ def load_merl_binary(
         names: material names (default: the file names without extension).
 
     Returns:
-        One file: ``values`` ``(3, n)`` with ``axes=("channel",)`` and ``names=(<its stem>,)``; several: ``(m, 3, n)`` with
-        ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr.
+        One file: ``values`` ``(3, n)`` with ``axes=("channel",)`` and ``names=(<its stem>,)``; several:
+        ``(m, 3, n)`` with ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr.
     """
     single = isinstance(paths, (str, os.PathLike))
     plist = [Path(paths)] if single else [Path(p) for p in paths]
@@ -402,17 +414,18 @@ def load_merl_binary(
     tables = []
     res = None
     for p in plist:
-        vals, r = read_merl_binary(p)
+        vals, r = read_merl_binary(p, scaled=False, copy=False)
         if res is not None and r != res:
             raise HeaderError(p, f"the resolution {res} of {plist[0]}", f"{r}")
         res = r
         tables.append(vals)
-    values = np.stack(tables)
+    values = tables[0][None] if len(tables) == 1 else np.stack(tables)  # one file: no copy before the gather
     valid = values >= 0.0
     names = tuple(names) if names is not None else tuple(p.stem for p in plist)
     if len(names) != len(plist):
         raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
     return _merl_measurements(
-        values, valid, res, subsample=subsample, seed=seed, names=names,
-        source=f"MERL .binary {', '.join(p.name for p in plist)}" + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
+        values, valid, res, subsample=subsample, seed=seed, names=names, scale=MERL_SCALE,
+        source=f"MERL .binary {', '.join(p.name for p in plist)}"
+        + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
     )

@@ -16,7 +16,9 @@ SYNTHETIC_DESCRIPTION = (
 )
 
 #: (name, albedo, lobe scale C, exponent n)
-_MATERIALS = (("synthetic-matte", 0.6, 0.3, 3.0), ("synthetic-satin", 0.35, 1.0, 8.0), ("synthetic-glossy", 0.2, 3.0, 20.0))
+_MATERIALS = (
+    ("synthetic-matte", 0.6, 0.3, 3.0), ("synthetic-satin", 0.35, 1.0, 8.0), ("synthetic-glossy", 0.2, 3.0, 20.0),
+)
 
 
 def synthetic_default(n: int = 400, seed: int = 0) -> Measurements:

@@ -283,7 +283,9 @@ def polynomial_program(model: PolynomialBRDF) -> Program:
     lanes = [_channel(prog, model, c, x) for c in range(int(np.prod(bs, dtype=int)))]
     if len(lanes) == 1:
         lanes = lanes * 3
-    prog.output([where_positive(var("uz"), var("vz"), f) for f in lanes])
+    # clamped at 0 like the renderer's light transport (polyjax.render.evaluate_rgb): a fitted polynomial may dip
+    # below 0, and a shader or a renderer must never transport negative radiance
+    prog.output([where_positive(var("uz"), var("vz"), call("max", f, const(0.0))) for f in lanes])
     return prog
 
 

@@ -29,7 +29,10 @@ _CHUNK = 1 << 16
 def _evaluate(brdf, u, v):
     n = u.shape[0]
     m = -(-n // _CHUNK) * _CHUNK
-    pad = lambda a: jnp.concatenate([a, jnp.tile(jnp.asarray([[0.0, 0.0, 1.0]], a.dtype), (m - n, 1))])
+
+    def pad(a):
+        return jnp.concatenate([a, jnp.tile(jnp.asarray([[0.0, 0.0, 1.0]], a.dtype), (m - n, 1))])
+
     uc, vc = pad(u).reshape(-1, _CHUNK, 3), pad(v).reshape(-1, _CHUNK, 3)
     out = jax.lax.map(lambda uv: evaluate_rgb(brdf, uv[0], uv[1]), (uc, vc))
     return out.reshape(m, 3)[:n]

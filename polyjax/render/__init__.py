@@ -8,8 +8,8 @@ Any BRDF renders through one protocol, a callable ``f(u, v) -> (..., 3)`` (light
 Scenes can be built inside ``jit``/``grad``; renders differentiate with respect to BRDF parameters,
 lights and environment texels (:mod:`polyjax.render._integrator`). :func:`light_samples` writes a
 render as a linear function of one object's BRDF (behind ``polyjax.fit_polynomial_to_images``);
-:func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``). Every BRDF can be importance-sampled
-(:func:`importance_sampler`).
+:func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``). Every BRDF can be
+importance-sampled (:func:`importance_sampler`).
 
 Typical use::
 
@@ -34,5 +34,6 @@ __all__ = [
     "SwapUV", "TabulatedBRDF", "cast_floats", "comparison_figure", "difference_images", "evaluate_rgb",
     "light_samples", "load_envmap", "mitsuba_bsdf_eval", "mitsuba_roughplastic", "mitsuba_scene_dict", "mosaic",
     "plan_effects", "pool_indices", "procedural_sky", "read_exr", "render", "render_grid", "render_linear",
-    "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png", "ImportanceSampler", "importance_sampler",
+    "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
+    "ImportanceSampler", "importance_sampler",
 ]

@@ -295,5 +295,6 @@ class TabulatedBRDF(eqx.Module):
 
 
 __all__ = [
-    "BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb", "rgb_brdf",
+    "BRDF", "ChannelsFirst", "Lambertian", "ParametricBRDF", "Phong", "SwapUV", "TabulatedBRDF", "evaluate_rgb",
+    "rgb_brdf",
 ]

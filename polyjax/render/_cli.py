@@ -79,16 +79,15 @@ def _reference(spec: str, m, k: int, root):
 
 def run_render(args) -> int:
     """Run ``polyjax render`` from parsed arguments; returns the exit status."""
-    import jax.numpy as jnp
     import numpy as np
 
     import polyjax as pj
 
-    from . import Camera, Scene, Sphere, SwapUV, comparison_figure, mosaic, render_grid, rgb_brdf, write_exr, write_png
     from .._cli import _parse_degrees
     from .._config import configured_data_root
     from .._errors import InputError
     from .._outputs import check_output_file
+    from . import Camera, Scene, Sphere, SwapUV, comparison_figure, mosaic, render_grid, rgb_brdf, write_exr, write_png
 
     root = getattr(args, "data_root", None)
     out = Path(args.out)

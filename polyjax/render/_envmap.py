@@ -37,8 +37,8 @@ class EnvironmentLight(eqx.Module):
     """
 
     image: Float[Array, "h w 3"]
-    cdf: Float[Array, "hw"]
-    pmf: Float[Array, "hw"]
+    cdf: Float[Array, " hw"]
+    pmf: Float[Array, " hw"]
 
     def __init__(self, image: ArrayLike, scale: float = 1.0):
         """Args:
@@ -207,7 +207,8 @@ def load_envmap(path: str | os.PathLike, scale: float = 1.0) -> EnvironmentLight
 
 
 def procedural_sky(height: int = 64, width: int = 128, sun_elevation_deg: float = 40.0, sun_azimuth_deg: float = 40.0,
-                   sun_radiance: float = 400.0, sun_radius_deg: float = 3.0, sky_radiance: float = 1.0) -> EnvironmentLight:
+                   sun_radiance: float = 400.0, sun_radius_deg: float = 3.0, sky_radiance: float = 1.0
+                   ) -> EnvironmentLight:
     """A built-in sky: a zenith-to-horizon gradient, a darker ground and a small bright sun disc.
 
     The sky radiance goes from blue-ish ``(0.35, 0.55, 1.0)`` at the zenith to ``(1, 1, 1)`` at the

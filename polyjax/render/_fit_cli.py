@@ -39,7 +39,7 @@ def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     )
     p.add_argument("scene", help="JSON scene description listing the EXR images and their lights")
     p.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
-    p.add_argument("--degree", type=int, default=5)
+    p.add_argument("--degree", type=int, default=5, help="polynomial degree p (default 5)")
     p.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
     p.add_argument("--saturation", type=float, default=None, help="exclude pixels with a channel at or above this")
     p.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees")

@@ -75,7 +75,8 @@ def _grid_impl(scene: Scene, groups, pool, seed, effects: Effects, spp: int):
     point_lights = scene.point_lights if effects.direct_point else ()
     pix = jnp.arange(cam.width * cam.height, dtype=jnp.uint32)
     salt = seed ^ jnp.uint32(_ENV_KEY)
-    background = scene.environment.radiance(d) if scene.environment is not None else jnp.broadcast_to(scene.background, d.shape)
+    background = (scene.environment.radiance(d) if scene.environment is not None
+                  else jnp.broadcast_to(scene.background, d.shape))
 
     def shade(brdf_module):
         rad = _direct(lambda u, v: evaluate_rgb(brdf_module, u, v), p, frame, vl, point_lights, pool, salt, pix, spp,
@@ -87,7 +88,7 @@ def _grid_impl(scene: Scene, groups, pool, seed, effects: Effects, spp: int):
         if stacked is None:
             outs.append(shade(static)[None])
         else:
-            outs.append(jax.vmap(lambda prm: shade(eqx.combine(prm, static)))(stacked))
+            outs.append(jax.vmap(lambda prm, static=static: shade(eqx.combine(prm, static)))(stacked))
     return outs, hit.reshape(cam.height, cam.width)
 
 
@@ -108,7 +109,8 @@ def render_grid(brdfs: Sequence[Sequence], scene: Scene | None = None, *, size: 
     """
     rows = [list(r) for r in brdfs]
     if not rows or not rows[0] or any(len(r) != len(rows[0]) for r in rows):
-        raise InputError(f"brdfs: expected a non-empty rectangular grid of BRDFs, found rows of lengths {[len(r) for r in rows]}")
+        raise InputError("brdfs: expected a non-empty rectangular grid of BRDFs, "
+                         f"found rows of lengths {[len(r) for r in rows]}")
     scene = sphere_scene(size) if scene is None else scene
     if not (isinstance(scene, Scene) and len(scene.objects) == 1 and isinstance(scene.objects[0], Sphere)):
         raise InputError("scene: expected a polyjax.render.Scene with exactly one Sphere for a grid of spheres")

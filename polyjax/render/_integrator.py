@@ -50,7 +50,7 @@ from jaxtyping import Array, Bool, Float
 from .._errors import InputError
 from ._brdf import evaluate_rgb
 from ._envmap import EnvironmentLight, pool_indices
-from ._scene import DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
+from ._scene import DirectionalLight, Effects, Scene, Sphere, plan_effects
 
 _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
 

@@ -22,7 +22,16 @@ from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
 from ._integrator import (
-    _ENV_KEY, _dot, _hash, _pool_size, _pool_stride, _primary, _radiance_pool, _to_local, _visible, cast_floats,
+    _ENV_KEY,
+    _dot,
+    _hash,
+    _pool_size,
+    _pool_stride,
+    _primary,
+    _radiance_pool,
+    _to_local,
+    _visible,
+    cast_floats,
 )
 from ._scene import DirectionalLight, Scene, plan_effects
 

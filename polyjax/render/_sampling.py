@@ -209,7 +209,7 @@ class ImportanceSampler(eqx.Module):
         return u, self.pdf(u, v)
 
     def sample(self, key: PRNGKeyArray, v: Float[ArrayLike, "3"], n: int
-               ) -> tuple[Float[Array, "n 3"], Float[Array, "n"]]:
+               ) -> tuple[Float[Array, "n 3"], Float[Array, " n"]]:
         """Draw ``n`` light directions for one view ``v`` (``(3,)``): ``(u (n, 3), pdf (n,))``, compiled once per
         ``n`` and dtype."""
         v = jnp.asarray(v)

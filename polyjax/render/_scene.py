@@ -161,7 +161,8 @@ class Plane(eqx.Module):
 
 
 class DirectionalLight(eqx.Module):
-    """A distant light: irradiance ``irradiance`` (RGB, on a surface facing it) from ``direction`` (towards the light)."""
+    """A distant light: irradiance ``irradiance`` (RGB, on a surface facing it) from ``direction`` (towards the
+    light)."""
 
     direction: Float[Array, "3"]
     irradiance: Float[Array, "3"]
@@ -222,7 +223,8 @@ class Scene(eqx.Module):
         for i, li in enumerate(lights):
             if not isinstance(li, (DirectionalLight, PointLight, EnvironmentLight)):
                 raise InputError(
-                    f"lights[{i}]: expected a DirectionalLight, PointLight or EnvironmentLight, found {type(li).__name__}"
+                    f"lights[{i}]: expected a DirectionalLight, PointLight or EnvironmentLight, "
+                    f"found {type(li).__name__}"
                 )
             n_env += isinstance(li, EnvironmentLight)
         if n_env > 1:
@@ -254,7 +256,8 @@ class Effects:
     """Which light-transport effects a render computes (decided before tracing by :func:`plan_effects`).
 
     Attributes:
-        direct_point: direct lighting from directional/point lights (closed form per pixel: one BRDF evaluation per light).
+        direct_point: direct lighting from directional/point lights (closed form per pixel: one BRDF evaluation per
+            light).
         shadows: visibility (shadow) rays towards lights; only when an object can occlude another.
         environment: environment-map lighting, importance-sampled (``spp`` samples per pixel).
         indirect: light reflected between objects (``max_bounces`` bounces, ``spp`` paths per pixel).

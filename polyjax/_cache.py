@@ -1,0 +1,153 @@
+"""JAX's persistent compilation cache: compile a program once per machine, not once per process.
+
+A polyjax fit runs in well under a millisecond once compiled, but compiling it takes seconds. JAX can keep the
+compiled programs on disk and load them in later processes (a program is found again when its shapes, dtypes,
+static arguments and JAX version are the same). The command line turns this on by default; API users call
+:func:`enable_compilation_cache` once. Importing polyjax never changes JAX's settings.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from pathlib import Path
+
+#: environment variable naming the cache folder; empty, ``off``, ``0``, ``no`` or ``false`` disables the cache
+CACHE_ENV = "POLYJAX_CACHE"
+_OFF = ("", "off", "0", "no", "false", "none")
+
+
+def cache_disabled_by_env() -> bool:
+    """True when ``$POLYJAX_CACHE`` is set to an off value (empty, ``off``, ``0``, ``no``, ``false``, ``none``)."""
+    value = os.environ.get(CACHE_ENV)
+    return value is not None and value.strip().lower() in _OFF
+
+
+def default_cache_dir() -> Path:
+    """The cache folder: ``$POLYJAX_CACHE`` if it names one, else ``$XDG_CACHE_HOME/polyjax/jax``
+    (``~/.cache/polyjax/jax`` when ``XDG_CACHE_HOME`` is unset)."""
+    value = os.environ.get(CACHE_ENV)
+    if value is not None and value.strip().lower() not in _OFF:
+        return Path(value).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "polyjax" / "jax"
+
+
+def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
+    """Turn on JAX's persistent compilation cache for this process (every jitted program, polyjax's or not).
+
+    Every compiled program is written, however small or quick to compile (JAX's defaults skip programs that
+    compile in under a second, which are most of polyjax's): the thresholds
+    ``jax_persistent_cache_min_compile_time_secs`` and ``jax_persistent_cache_min_entry_size_bytes`` are set to
+    0 and -1. Later processes with the same shapes, options and JAX version load the programs instead of
+    compiling them (a warm ``polyjax fit`` takes about 0.4 of a cold one: ``benchmarks/bench_latency_cli.py``).
+    Tracing and lowering still run in every process (the cache is keyed by the lowered program).
+
+    Args:
+        path: the cache folder; default :func:`default_cache_dir` (``$POLYJAX_CACHE`` or
+            ``$XDG_CACHE_HOME/polyjax/jax``). Created if missing.
+
+    Returns:
+        The folder in use.
+
+    Raises:
+        InputError: ``path`` exists and is not a folder, or cannot be created.
+    """
+    import jax
+
+    from ._errors import InputError
+
+    folder = Path(path).expanduser() if path is not None else default_cache_dir()
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"cache folder {str(folder)!r}: exists and is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"cache folder {str(folder)!r}: cannot be created ({e.strerror or e})") from None
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    try:  # a cache already initialised (a program compiled before this call) keeps its old folder otherwise
+        from jax._src import compilation_cache
+
+        if compilation_cache.is_initialized():
+            compilation_cache.reset_cache()
+    except (ImportError, AttributeError):  # pragma: no cover - private API moved; the settings above still apply
+        pass
+    return folder
+
+
+_counts = {"requests": 0, "answered": 0}
+_listening = False
+
+
+def _listen() -> None:
+    """Count the persistent cache's look-ups and their outcomes (a hit, or a compiled program written)."""
+    global _listening
+    if _listening:
+        return
+    import jax.monitoring
+
+    def on_event(event: str, **_) -> None:
+        if event == "/jax/compilation_cache/compile_requests_use_cache":
+            _counts["requests"] += 1
+        elif event in ("/jax/compilation_cache/cache_hits", "/jax/compilation_cache/cache_misses"):
+            _counts["answered"] += 1
+
+    jax.monitoring.register_event_listener(on_event)
+    _listening = True
+
+
+class compile_notice:
+    """Context manager: one line on stderr when the block is still compiling after ``delay`` seconds.
+
+    The command line wraps its fits in it, so that the seconds JAX spends compiling a program for new shapes are
+    not silence. With the cache on, the line appears only while a program that the cache did not hold is being
+    compiled (a warm run that is merely slow stays quiet); with the cache off, whenever the block takes longer than
+    ``delay`` (default 1 s, ``$POLYJAX_COMPILE_NOTICE_SECS``). At most one line per process.
+    """
+
+    printed = False
+
+    def __init__(self, what: str, cache: Path | None, delay: float | None = None, stream=None):
+        self.what, self.cache = what, cache
+        self.delay = float(os.environ.get("POLYJAX_COMPILE_NOTICE_SECS", 1.0)) if delay is None else float(delay)
+        self.stream = stream
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _compiling(self) -> bool:
+        return self.cache is None or _counts["requests"] > _counts["answered"]
+
+    def _watch(self) -> None:
+        if self._done.wait(self.delay):
+            return
+        while not compile_notice.printed:
+            if self._compiling():
+                self._say()
+                return
+            if self._done.wait(0.1):
+                return
+
+    def _say(self) -> None:
+        compile_notice.printed = True
+        where = (f"kept in {self.cache} for later runs" if self.cache is not None
+                 else "the compilation cache is off, so every process compiles again")
+        stream = self.stream if self.stream is not None else sys.stderr
+        print(f"polyjax: compiling {self.what} for these shapes and options (once per machine; {where}) ...",
+              file=stream, flush=True)
+
+    def __enter__(self):
+        if not compile_notice.printed:
+            if self.cache is not None:
+                _listen()
+            self._thread = threading.Thread(target=self._watch, daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._done.set()
+        if self._thread is not None:
+            self._thread.join()
+        return False

@@ -1,0 +1,144 @@
+"""Rusinkiewicz variable sets and the log-space polynomial model f = exp(poly) - eps (polyjax._logfit)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import polyjax as pj
+
+from _baseline_problems import synthetic_geometry
+
+RUS = ["rusinkiewicz", "rusinkiewicz-phid"]
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    return synthetic_geometry(500, seed=4)
+
+
+def test_rusinkiewicz_variables_are_the_merl_bin_angles():
+    """Independent check: the MERL grid's own (theta_h, theta_d, phi_d) bin centres, mapped to directions."""
+    th, td, pd = (a[::331] for a in pj.data.merl_bin_angles())
+    u, v = pj.data.rusinkiewicz_to_directions(th, td, pd)
+    ok = (u[:, 2] > 0) & (v[:, 2] > 0)
+    x = np.asarray(pj.explanatory_variables("rusinkiewicz-phid", jnp.asarray(u[ok]), jnp.asarray(v[ok])))
+    np.testing.assert_allclose(x[:, 0], th[ok], atol=1e-12)
+    np.testing.assert_allclose(x[:, 1], td[ok], atol=1e-12)
+    np.testing.assert_allclose(x[:, 2], np.sin(td[ok]) ** 2 * np.cos(2 * pd[ok]), atol=1e-12)
+    x2 = np.asarray(pj.explanatory_variables("rusinkiewicz", jnp.asarray(u[ok]), jnp.asarray(v[ok])))
+    np.testing.assert_array_equal(x2, x[:, :2])
+
+
+@pytest.mark.parametrize("variables", RUS)
+def test_rusinkiewicz_gradients_finite_at_theta_zero(variables):
+    """u = v = n (theta_h = theta_d = 0), u = v (theta_d = 0), h = n (theta_h = 0): finite Jacobians."""
+    z = jnp.array([0.0, 0.0, 1.0])
+    a = jnp.array([0.3, 0.0, np.sqrt(1 - 0.09)])
+    pairs = [(z, z), (a, a), (a, a * jnp.array([-1.0, -1.0, 1.0]))]
+    for u, v in pairs:
+        ju, jv = jax.jacfwd(lambda p, q: pj.explanatory_variables(variables, p, q), argnums=(0, 1))(u, v)
+        gu = jax.jacrev(lambda p, q=v: pj.explanatory_variables(variables, p, q))(u)
+        assert np.all(np.isfinite(np.asarray(ju))) and np.all(np.isfinite(np.asarray(jv)))
+        assert np.all(np.isfinite(np.asarray(gu)))
+
+
+def _lobe(u, v):
+    """A measured-like BRDF: diffuse plus a narrow Beckmann-like lobe with Fresnel."""
+    h = pj.half_vector(u, v)
+    t2 = 1.0 / h[:, 2] ** 2 - 1.0
+    vh = jnp.sum(v * h, -1)
+    return 0.1 + 3.0 * jnp.exp(-t2 / 0.02) * (0.05 + 0.95 * (1 - vh) ** 5) / h[:, 2] ** 4
+
+
+@pytest.mark.parametrize("variables", RUS)
+def test_identity_response_surface_recovers_its_own_form(variables, geometry):
+    """Data that is a quadratic in the variables: the full response surface (eq. 2) of degree 2 fits it exactly."""
+    u, v = geometry
+    x = pj.explanatory_variables(variables, u, v)
+    b = 0.3 + 0.5 * x[:, 0] - 0.4 * x[:, 0] ** 2 + 0.2 * x[:, 0] * x[:, 1] + 0.1 * x[:, -1]
+    m = pj.fit_polynomial(u, v, b, variables=variables, degree=2, interactions=True, cutoff_deg=None)
+    assert float(m.l2) < 1e-12 and int(m.status) == 0
+    np.testing.assert_allclose(np.asarray(m(u, v)), np.asarray(b), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("variables", RUS)
+def test_log_fit_recovers_its_own_form(variables, geometry):
+    """b = exp(quadratic) - eps: the log-space start is exact and the Gauss-Newton steps keep it."""
+    u, v = geometry
+    x = pj.explanatory_variables(variables, u, v)
+    eps = 1e-7  # below the data's smallest exp(...) ~ 1e-5, so no value is clamped at 0
+    b = jnp.exp(0.5 - 6.0 * x[:, 0] ** 2 + 0.3 * x[:, 1] + 0.8 * x[:, 0] * x[:, 1] - 0.2 * x[:, -1]) - eps
+    m = pj.fit_log_polynomial(u, v, b[None].repeat(2, 0), variables=variables, degree=2, eps=eps, steps=2)
+    assert m.link == "log" and m.eps == eps and m.batch_shape == (2,)
+    assert np.all(np.asarray(m.l2) < 1e-10)
+    np.testing.assert_allclose(np.asarray(m(u, v))[1], np.asarray(b), rtol=1e-9, atol=1e-12)
+
+
+def test_log_fit_steps_lower_equation_11(geometry):
+    """On data outside the model's form, the reweighted solves reduce the L2 of eq. (11); the reported l2 is it."""
+    u, v = geometry
+    b = _lobe(u, v)
+    ls = []
+    for steps in (0, 1, 3):
+        m = pj.fit_log_polynomial(u, v, b, variables="rusinkiewicz", degree=3, steps=steps)
+        np.testing.assert_allclose(float(m.l2), float(pj.l2_error(b, m(u, v), u, v)), rtol=1e-12)
+        ls.append(float(m.l2))
+    # the weighted log-space start is already close: the steps gain ~1% here (strictly, not by rounding)
+    assert ls[2] <= ls[1] <= ls[0] and ls[2] < (1 - 5e-3) * ls[0], ls
+    lin = pj.fit_polynomial(u, v, b, variables="rusinkiewicz", degree=3, interactions=True)
+    assert ls[2] < 0.75 * float(lin.l2), (ls, float(lin.l2))  # same degree, same terms: 0.71x here
+
+
+@pytest.mark.parametrize("variables", RUS)
+def test_log_model_is_reciprocal(variables, geometry):
+    u, v = geometry
+    m = pj.fit_log_polynomial(u, v, _lobe(u, v), variables=variables, degree=3, steps=1)
+    np.testing.assert_allclose(np.asarray(m(v, u)), np.asarray(m(u, v)), rtol=1e-10, atol=1e-12)
+
+
+def test_fit_polynomial_link_option_and_save_load(tmp_path, geometry):
+    u, v = geometry
+    b = _lobe(u, v)
+    a = pj.fit_polynomial(u, v, b, variables="rusinkiewicz", degree=3, interactions=True, link="log", steps=2)
+    c = pj.fit_log_polynomial(u, v, b, variables="rusinkiewicz", degree=3, interactions=True, steps=2)
+    np.testing.assert_array_equal(np.asarray(a.coefficients), np.asarray(c.coefficients))
+    for suffix in (".npz", ".json"):
+        back = pj.load_model(pj.save_model(tmp_path / f"m{suffix}", a))
+        assert back.link == "log" and back.eps == a.eps
+        np.testing.assert_array_equal(np.asarray(back(u, v)), np.asarray(a(u, v)))
+    with pytest.raises(pj.InputError, match="link: expected"):
+        pj.fit_polynomial(u, v, b, link="sqrt")
+    with pytest.raises(pj.InputError, match="eps: expected a positive offset"):
+        pj.fit_log_polynomial(u, v, b, eps=0.0)
+    with pytest.raises(pj.InputError, match="values: expected finite"):
+        pj.fit_log_polynomial(u, v, b.at[3].set(jnp.nan))
+
+
+def _loss(u, v, b):
+    return pj.fit_log_polynomial(u, v, b, variables="rusinkiewicz", degree=3, steps=2).l2
+
+
+def test_log_fit_jvp_matches_finite_differences(geometry):
+    """Forward-mode derivative of the fitted L2 w.r.t. the values (the step choice is locally constant)."""
+    u, v = geometry
+    b = _lobe(u, v)
+    d = jnp.asarray(np.random.default_rng(0).normal(size=b.shape)) * 0.01
+    _, t = jax.jvp(lambda y: _loss(u, v, y), (b,), (d,))
+    h = 1e-5
+    fd = (_loss(u, v, b + h * d) - _loss(u, v, b - h * d)) / (2 * h)
+    assert np.isfinite(float(t))
+    np.testing.assert_allclose(float(t), float(fd), rtol=1e-5)
+
+
+@pytest.mark.xfail(reason="reverse mode through the closed-form solve (custom_vmap in polyjax/_linalg.py) is not "
+                          "available yet; fit_polynomial's own jax.grad fails the same way", strict=False)
+def test_log_fit_grad_matches_finite_differences(geometry):
+    u, v = geometry
+    b = _lobe(u, v)
+    g = jax.grad(lambda y: _loss(u, v, y))(b)
+    d = jnp.asarray(np.random.default_rng(1).normal(size=b.shape)) * 0.01
+    h = 1e-5
+    fd = (_loss(u, v, b + h * d) - _loss(u, v, b - h * d)) / (2 * h)
+    assert np.all(np.isfinite(np.asarray(g)))
+    np.testing.assert_allclose(float(jnp.dot(g, d)), float(fd), rtol=1e-5)
