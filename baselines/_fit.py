@@ -34,10 +34,12 @@ import numpy as np
 import polyjax as pj
 from polyjax import InputError, Result, raise_on_status
 
+from ._implicit import implicit_optimum
 from ._multistart import fit_kernel
 from ._registry import get_model
 from ._result import BaselineFit
 from ._solvers import BACKENDS
+from ._staged import staged_kernel
 from ._starts import check_n_starts
 from ._zernike import fit_zernike
 
@@ -127,12 +129,20 @@ def fit(
     else:
         raw0 = _check_starts(model, starts, inp.values.dtype, inp.batch, max_steps, limit_steps)
         n_starts = n_starts if raw0 is None else raw0.shape[1]
-        out = fit_kernel(
-            model.name, inp.u, inp.v, inp.values, wl, wc2, jax.random.PRNGKey(0) if key is None else key, raw0,
-            backend=backend, n_starts=int(n_starts), max_steps=int(max_steps), rtol=float(rtol), atol=float(atol),
+        sg = jax.lax.stop_gradient  # the solver loops see constants; the optimum differentiates implicitly
+        opts = dict(
+            n_starts=int(n_starts), max_steps=int(max_steps), rtol=float(rtol), atol=float(atol),
             stage_steps=int(min(stage_steps, max_steps)), refine=None if refine is None else int(refine),
             limit_steps=int(limit_steps),
         )
+        args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
+                jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
+        out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
+        out["raw"] = implicit_optimum(model, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
+        out["params"] = model.to_params(out["raw"])
+        pred = jax.vmap(lambda p: model.evaluate(p, inp.u, inp.v))(out["params"])
+        out["l2"] = pj.l2_error(inp.values, pred, inp.u, inp.v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
+        out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
     # one result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     # NONFINITE, as in the polynomial fit
     status = out["status"]
