@@ -106,6 +106,14 @@ def fit(
     Inputs follow the rules every fitter shares (:func:`polyjax.prepare_inputs`), so the input preparation also
     runs under ``jit``.
 
+    The stages (screening, refinement, range-limit rounds) are jobs of one loop around one Levenberg-Marquardt
+    solve (:mod:`baselines._multistart`): the solver is traced and compiled once per model and shapes.
+
+    Differentiable (``jit``, ``grad``, ``jvp``, ``vmap``) w.r.t. ``values``, ``weights``, ``u`` and ``v``, for
+    ``params``, ``raw`` and ``l2``: the kept optimum by the implicit function theorem (:mod:`baselines._implicit`);
+    the solver runs on constants and is never differentiated, the choice of start is piecewise constant, samples
+    cut or masked get derivative 0. ``starts`` and ``key`` are not differentiated.
+
     A kept start that runs out of steps with parameters close to a limit of their range (in ``sin^2``
     within ``1e-2``, and as a second candidate ``1e-1``, of 0 or 1) is put on those limits and given
     ``limit_steps`` more steps, twice at most; the best candidate is kept if its L2 is no worse than
