@@ -8,8 +8,9 @@ processes, one after the other, in one run:
 - ``polyjax warm``: the same with the cache the cold process filled;
 - ``staged cold``: the previous kernel (one traced Levenberg-Marquardt loop per stage: screening, refinement and
   two range-limit rounds), kept for the jaxopt backend and run here with optimistix, cold cache: the "before";
-- ``scipy``: ``scipy.optimize.least_squares(method="lm")`` from the same 16 starts on the same residuals (the
-  baselines' model evaluated by jitted JAX functions, as in ``bench_baselines.py``; process included).
+- ``scipy``: ``scipy.optimize.least_squares(method="lm")`` from the same 16 starts (computed by this parent process
+  and passed in a file) on the same residuals (the baselines' model evaluated by jitted JAX functions, as in
+  ``bench_baselines.py``; process, JAX import and the residuals' compilation included).
 
 The ratios are whole-process times. Targets: polyjax's first fit <= 2x scipy's fresh process with a warm cache and
 <= 4x cold.
@@ -51,7 +52,7 @@ key = jax.random.PRNGKey(0)
 if mode == "scipy":
     from scipy.optimize import least_squares
     u, v = jax.numpy.asarray(data.u), jax.numpy.asarray(data.v)
-    starts = np.asarray(bl.initial_guesses(name, data, n_starts=16, key=key))
+    starts = np.load(sys.argv[4])  # the 16 starts baselines.fit uses, computed by the parent process
     w, wc2 = pj.fit_weights(u, v, data.weights, None, 80.0)
     sw2 = wc2 / jax.numpy.sum(w)
     y = jax.numpy.asarray(data.values)
@@ -87,11 +88,11 @@ else:
 """
 
 
-def run(name, mode, cache):
+def run(name, mode, cache, starts="-"):
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", _CHILD, name, mode, cache], capture_output=True, text=True, env=env,
-                         cwd=ROOT, check=False)
+    out = subprocess.run([sys.executable, "-c", _CHILD, name, mode, cache, starts], capture_output=True, text=True,
+                         env=env, cwd=ROOT, check=False)
     wall = time.perf_counter() - t0
     if out.returncode != 0:
         raise RuntimeError(f"{name} {mode}: {out.stderr[-2000:]}")
@@ -102,6 +103,13 @@ def run(name, mode, cache):
 
 def main(argv=None):
     sys.path.insert(0, str(ROOT))
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+
+    import baselines as bl
+    import polyjax as pj
     from baselines import PAPER_MODELS
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -115,7 +123,10 @@ def main(argv=None):
     rows = {}
     for name in names:
         with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as cache_old:
-            recs = {"scipy": run(name, "scipy", "-"), "polyjax cold": run(name, "fit", cache),
+            starts = os.path.join(cache_old, "starts.npy")
+            np.save(starts, np.asarray(bl.initial_guesses(name, pj.data.load_curet(samples=[25]), n_starts=16,
+                                                          key=jax.random.PRNGKey(0))))
+            recs = {"scipy": run(name, "scipy", "-", starts), "polyjax cold": run(name, "fit", cache),
                     "polyjax warm": run(name, "fit", cache)}
             if not args.no_staged:
                 recs["staged cold"] = run(name, "staged", cache_old)
