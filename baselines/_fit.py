@@ -27,6 +27,8 @@ continues the single best start: on the 52 CUReT samples x 7 models it changes t
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -146,10 +148,7 @@ def fit(
         args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
                 jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
         out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
-        out["raw"] = implicit_optimum(model, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
-        out["params"] = model.to_params(out["raw"])
-        pred = jax.vmap(lambda p: model.evaluate(p, inp.u, inp.v))(out["params"])
-        out["l2"] = pj.l2_error(inp.values, pred, inp.u, inp.v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
+        out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
         out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
     # one result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     # NONFINITE, as in the polynomial fit
@@ -161,6 +160,16 @@ def fit(
     fitted = BaselineFit(**{k: a.reshape(inp.batch + a.shape[1:]) for k, a in out.items()}, name=model.name,
                          backend=backend)
     return raise_on_status("fit", fitted.status, fitted) if throw else fitted
+
+
+@functools.partial(jax.jit, static_argnames=("name",))
+def _package(name, raw, u, v, y, wl, wc2):
+    """The kept optimum with its implicit derivative, its physical parameters and L2 (one compiled call)."""
+    model = get_model(name)
+    raw = implicit_optimum(model, raw, u, v, y, wl, wc2)
+    params = model.to_params(raw)
+    pred = jax.vmap(lambda p: model.evaluate(p, u, v))(params)
+    return raw, params, pj.l2_error(y, pred, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
 
 
 def _check_starts(model, starts, dtype, batch, max_steps, limit_steps):
