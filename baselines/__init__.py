@@ -15,6 +15,7 @@ from ._blinn_phong import blinn_phong
 from ._common import BaselineModel, Transform
 from ._cook_torrance import cook_torrance
 from ._fit import fit
+from ._fit_images import fit_to_images
 from ._lafortune import lafortune
 from ._lafortune_anisotropic import lafortune_anisotropic
 from ._oren_nayar import oren_nayar
@@ -33,7 +34,7 @@ from ._zernike import disk_point, n_zernike_terms, zernike, zernike_design, zern
 __all__ = [
     "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS",
     "PAPER_MODELS", "Transform", "abc", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit",
-    "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms", "oren_nayar",
-    "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer", "zernike",
-    "zernike_design", "zernike_terms",
+    "fit_to_images", "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms",
+    "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",
+    "zernike", "zernike_design", "zernike_terms",
 ]

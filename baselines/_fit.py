@@ -27,6 +27,8 @@ continues the single best start: on the 52 CUReT samples x 7 models it changes t
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,10 +36,12 @@ import numpy as np
 import polyjax as pj
 from polyjax import InputError, Result, raise_on_status
 
+from ._implicit import implicit_optimum
 from ._multistart import fit_kernel
 from ._registry import get_model
 from ._result import BaselineFit
 from ._solvers import BACKENDS
+from ._staged import staged_kernel
 from ._starts import check_n_starts
 from ._zernike import fit_zernike
 
@@ -104,6 +108,14 @@ def fit(
     Inputs follow the rules every fitter shares (:func:`polyjax.prepare_inputs`), so the input preparation also
     runs under ``jit``.
 
+    The stages (screening, refinement, range-limit rounds) are jobs of one loop around one Levenberg-Marquardt
+    solve (:mod:`baselines._multistart`): the solver is traced and compiled once per model and shapes.
+
+    Differentiable (``jit``, ``grad``, ``jvp``, ``vmap``) w.r.t. ``values``, ``weights``, ``u`` and ``v``, for
+    ``params``, ``raw`` and ``l2``: the kept optimum by the implicit function theorem (:mod:`baselines._implicit`);
+    the solver runs on constants and is never differentiated, the choice of start is piecewise constant, samples
+    cut or masked get derivative 0. ``starts`` and ``key`` are not differentiated.
+
     A kept start that runs out of steps with parameters close to a limit of their range (in ``sin^2``
     within ``1e-2``, and as a second candidate ``1e-1``, of 0 or 1) is put on those limits and given
     ``limit_steps`` more steps, twice at most; the best candidate is kept if its L2 is no worse than
@@ -127,12 +139,17 @@ def fit(
     else:
         raw0 = _check_starts(model, starts, inp.values.dtype, inp.batch, max_steps, limit_steps)
         n_starts = n_starts if raw0 is None else raw0.shape[1]
-        out = fit_kernel(
-            model.name, inp.u, inp.v, inp.values, wl, wc2, jax.random.PRNGKey(0) if key is None else key, raw0,
-            backend=backend, n_starts=int(n_starts), max_steps=int(max_steps), rtol=float(rtol), atol=float(atol),
+        sg = jax.lax.stop_gradient  # the solver loops see constants; the optimum differentiates implicitly
+        opts = dict(
+            n_starts=int(n_starts), max_steps=int(max_steps), rtol=float(rtol), atol=float(atol),
             stage_steps=int(min(stage_steps, max_steps)), refine=None if refine is None else int(refine),
             limit_steps=int(limit_steps),
         )
+        args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
+                jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
+        out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
+        out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
+        out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
     # one result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     # NONFINITE, as in the polynomial fit
     status = out["status"]
@@ -143,6 +160,16 @@ def fit(
     fitted = BaselineFit(**{k: a.reshape(inp.batch + a.shape[1:]) for k, a in out.items()}, name=model.name,
                          backend=backend)
     return raise_on_status("fit", fitted.status, fitted) if throw else fitted
+
+
+@functools.partial(jax.jit, static_argnames=("name",))
+def _package(name, raw, u, v, y, wl, wc2):
+    """The kept optimum with its implicit derivative, its physical parameters and L2 (one compiled call)."""
+    model = get_model(name)
+    raw = implicit_optimum(model, raw, u, v, y, wl, wc2)
+    params = model.to_params(raw)
+    pred = jax.vmap(lambda p: model.evaluate(p, u, v))(params)
+    return raw, params, pj.l2_error(y, pred, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
 
 
 def _check_starts(model, starts, dtype, batch, max_steps, limit_steps):

@@ -1,6 +1,20 @@
-"""The multi-start kernel: every start for ``stage_steps`` steps, the ``refine`` best of each lane to
-convergence, the best converged start kept, and a kept start that ran out of steps next to its parameters' range
-limits put on them and finished (see :func:`baselines.fit`)."""
+"""The multi-start kernel, one solver loop: every start for ``stage_steps`` steps, the ``refine`` best of each lane
+to convergence, the best converged start kept, and a kept start that ran out of steps next to its parameters' range
+limits put on them and finished (see :func:`baselines.fit`).
+
+All of it is one ``fori_loop`` over *jobs*; each job solves one block of ``(B, R)`` starts (``R = refine``, one
+start per lane by default) with a step budget per start (:func:`baselines._lm.lm_solve`), so the Levenberg-Marquardt
+loop is traced and compiled once per (model, shapes) whatever the stages:
+
+- stage 1: ``ceil(S / R)`` jobs, the starts ``[j R, (j + 1) R)`` of every lane, ``stage_steps`` steps each;
+- stage 2: one job, the ``R`` best starts of each lane after stage 1, ``max_steps - stage_steps`` steps (0 for those
+  stage 1 already converged);
+- range limits: per round (two at most), the kept start put on its limits with the two tolerances of
+  :data:`_LIMIT_TOLS` (``ceil(2 / R)`` jobs), ``limit_steps`` steps for lanes that need it and 0 for the others.
+
+A job's work is that of its block, so the stages cost what separate solves of the same sizes cost; the jaxopt
+backend keeps its own staged kernel (:mod:`baselines._staged`).
+"""
 
 from __future__ import annotations
 
@@ -8,49 +22,53 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from polyjax import Result, l2_error
+from polyjax import Result
 
+from ._lm import lm_solve
 from ._registry import get_model
-from ._solvers import run_starts
+from ._solvers import residual_fn
+from ._staged import _LIMIT_TOLS, _at, _pick, finish
 from ._starts import starts as make_starts
 
-
-def _at(a, idx):
-    """``a[b, idx[b]]`` for every lane ``b``: ``a`` is ``(B, S, ...)``, ``idx`` is ``(B,)``."""
-    return jnp.take_along_axis(a, idx.reshape(idx.shape + (1,) * (a.ndim - 1)), axis=1)[:, 0]
-
-
-def _pick(score_l2, code):
-    """Index of the best start per lane: converged and finite first, then any finite one."""
-    conv = jnp.where(code == Result.OK, score_l2, jnp.inf)
-    any_conv = jnp.any(jnp.isfinite(conv), axis=-1)
-    return jnp.where(any_conv, jnp.argmin(conv, axis=-1), jnp.argmin(score_l2, axis=-1))
-
-
-# a kept start that ran out of steps with parameters close to their range limits (in the unit
-# coordinate sin^2: one candidate per tolerance) is put on them and gets `limit_steps` more steps, up to
-# _LIMIT_ROUNDS times; _LIMIT_TOL flags the parameters reported as on a limit
-_LIMIT_TOLS = (1e-2, 1e-1)
-_LIMIT_TOL = _LIMIT_TOLS[0]
 _LIMIT_ROUNDS = 2
+_A, _B, _C = 0, 1, 2  # job kinds: stage 1, stage 2, range-limit round
+
+
+def _solve_block(model, u, v, y, sw, scale, raw0, budget, rtol, atol):
+    """``raw0 (B, R, P)``, ``budget (B, R)`` -> raw, code, steps, L2 ``(B, R, ...)`` (L2 ``inf`` if not finite)."""
+    fn = residual_fn(model, u, v)
+
+    def one(r0, b, yb, swb):
+        raw, code, steps = lm_solve(fn, r0, (yb, swb), b, rtol, atol)
+        res = fn(raw, (yb, swb))
+        loss = jnp.sum(res * res)
+        finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
+        return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
+
+    raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, 0, None, None)))(raw0, budget, y, sw)
+    return raw, code, steps, l2 * scale
+
+
+def _schedule(ns, refine, limit_steps):
+    """Static job table: ``(R, kinds, n_stage1_jobs, jobs_per_round)``."""
+    r = ns if refine is None or refine >= ns else refine
+    n_a = -(-ns // r)
+    kinds = [_A] * n_a + ([_B] if r < ns else [])
+    per_round = -(-len(_LIMIT_TOLS) // r)
+    kinds += [_C] * (per_round * (_LIMIT_ROUNDS if limit_steps > 0 else 0))
+    return r, np.asarray(kinds, np.int32), n_a, per_round
 
 
 @functools.partial(
     jax.jit,
-    static_argnames=(
-        "name", "backend", "n_starts", "max_steps", "rtol", "atol", "stage_steps", "refine", "limit_steps",
-    ),
+    static_argnames=("name", "n_starts", "max_steps", "rtol", "atol", "stage_steps", "refine", "limit_steps"),
 )
-def fit_kernel(
-    name, u, v, y, wl, wc2, key, raw0, *, backend, n_starts, max_steps, rtol, atol, stage_steps, refine, limit_steps
-):
-    """Every start of every lane ``y (B, n)``: stage 1 (``stage_steps``), stage 2 (the ``refine`` best to
-    convergence), the pick of the best start, and up to two range-limit rounds; a dict of ``(B, ...)`` arrays.
-
-    One jitted function (longer than the project's usual 80 lines) so that the stages, the pick and the
-    range-limit rounds compile into one program; each stage is a call of :func:`run_starts`.
-    """
+def fit_kernel(name, u, v, y, wl, wc2, key, raw0, *, n_starts, max_steps, rtol, atol, stage_steps, refine, limit_steps):
+    """Every start of every lane ``y (B, n)`` through the job schedule of the module docs; a dict of ``(B, ...)``
+    arrays (see :class:`baselines.BaselineFit`). Not differentiable itself: :func:`baselines.fit` attaches the
+    derivative of the kept optimum (:mod:`baselines._implicit`)."""
     model = get_model(name)
     den = jnp.sum(wl, axis=-1, keepdims=True)
     sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
@@ -60,75 +78,90 @@ def fit_kernel(
     sw = sw / scale
     if raw0 is None:
         raw0 = make_starts(model, u, v, y, wc2, key, n_starts)
-    nb, ns, _ = raw0.shape
-    take = lambda a, idx: jnp.take_along_axis(a, idx, axis=1)  # noqa: E731
-    if refine is None or refine >= ns:
-        raw, code, steps, sl2 = run_starts(model, backend, u, v, y, sw, scale, raw0, max_steps, rtol, atol)
-    else:
-        # stage 1: every start for a few steps; stage 2: the `refine` best of each lane to convergence
-        raw1, code1, steps1, sl21 = run_starts(model, backend, u, v, y, sw, scale, raw0, stage_steps, rtol, atol)
-        order = jnp.argsort(sl21, axis=1)[:, :refine]  # (B, K)
-        raw2, code2, steps2, sl22 = run_starts(
-            model, backend, u, v, y, sw, scale, take(raw1, order[..., None]), max(max_steps - stage_steps, 1), rtol,
-            atol,
-        )
-        done = code1 == Result.OK
-        raw, code, steps, sl2 = raw1, code1, steps1, sl21
-        # starts not continued: keep stage-1 state (those not converged are MAX_STEPS)
-        d = take(done, order)
-        upd = lambda a, b: jnp.where(  # noqa: E731
-            d.reshape(d.shape + (1,) * (b.ndim - 2)), take(a, order.reshape(order.shape + (1,) * (a.ndim - 2))), b
-        )
-        raw_sel = upd(raw1, raw2)
-        code_sel = jnp.where(d, take(code1, order), code2)
-        steps_sel = take(steps1, order) + jnp.where(d, 0, steps2)
-        sl2_sel = jnp.where(d, take(sl21, order), sl22)
-        rows = jnp.arange(nb)[:, None]
-        raw = raw.at[rows, order].set(raw_sel)
-        code = code.at[rows, order].set(code_sel)
-        steps = steps.at[rows, order].set(steps_sel)
-        sl2 = sl2.at[rows, order].set(sl2_sel)
-    best = _pick(sl2, code)
-    raw_b, code_b, steps_b, l2_b = _at(raw, best), _at(code, best), _at(steps, best), _at(sl2, best)
-    # a kept start that ran out of steps next to a range limit: put it on the limit and finish from there
-    # (the best candidate is kept if its L2 is no worse than before; its own status is reported)
-    def limit_round(state):
-        raw_b, code_b, l2_b, steps_b = state
-        snapped = [model.snap_to_limits(raw_b, tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
-        retry = (code_b == Result.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
-        cand = jnp.stack([jnp.where(retry[:, None], r, raw_b) for r, _ in snapped], axis=1)  # (B, C, P)
-        raw_p, code_p, steps_p, l2_p = run_starts(model, backend, u, v, y, sw, scale, cand, limit_steps, rtol, atol)
-        better = jnp.isfinite(l2_p) & (l2_p <= (l2_b * (1.0 + rtol) + atol * scale[:, 0])[:, None])
-        c = _pick(jnp.where(better, l2_p, jnp.inf), code_p)
-        at = functools.partial(_at, idx=c)
-        take_p = retry & at(better)
-        return (
-            jnp.where(take_p[:, None], at(raw_p), raw_b), jnp.where(take_p, at(code_p), code_b),
-            jnp.where(take_p, at(l2_p), l2_b), steps_b + jnp.where(retry, at(steps_p), 0),
-        )
-
-    def needs_round(state):
-        raw_b, code_b = state[0], state[1]
-        near = model.snap_to_limits(raw_b, _LIMIT_TOLS[-1])[1]
-        return jnp.any((code_b == Result.MAX_STEPS) & jnp.any(near, axis=-1))
-
-    state = (raw_b, code_b, l2_b, steps_b)
-    for _ in range(_LIMIT_ROUNDS if limit_steps > 0 else 0):  # skipped at run time when no lane needs it
-        state = jax.lax.cond(needs_round(state), limit_round, lambda s: s, state)
-    raw_b, code_b, l2_b, steps_b = state
-    rows = jnp.arange(nb)
-    sl2 = sl2.at[rows, best].set(l2_b)
-    code = code.at[rows, best].set(code_b)
-    ok = jnp.all(jnp.isfinite(raw_b), axis=-1)
-    raw_b = jnp.where(ok[:, None], raw_b, raw0[:, 0])  # never hand back NaN parameters
-    code_b = jnp.where(ok, code_b, Result.NONFINITE)
-    params = model.to_params(raw_b)
-    pred = jax.vmap(lambda p: model.evaluate(p, u, v))(params)
-    l2 = l2_error(y, pred, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
-    no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
-    code_b = jnp.where(no_samples, Result.NO_SAMPLES, code_b).astype(jnp.int32)
-    return dict(
-        params=params, raw=raw_b, l2=l2, status=code_b, steps=steps_b, success=(code_b == Result.OK) & jnp.isfinite(l2),
-        start_l2=sl2, start_status=code.astype(jnp.int32), best_start=best.astype(jnp.int32),
-        at_limit=model.snap_to_limits(raw_b, _LIMIT_TOL)[1],
+    nb, ns, npar = raw0.shape
+    r, kinds, n_a, per_round = _schedule(ns, refine, limit_steps)
+    one_stage = r == ns
+    rows = jnp.arange(nb)[:, None]
+    ncand = per_round * r
+    i32, f = jnp.int32, raw0.dtype
+    carry0 = dict(
+        raw=raw0, code=jnp.full((nb, ns), Result.MAX_STEPS, i32), steps=jnp.zeros((nb, ns), i32),
+        sl2=jnp.full((nb, ns), jnp.inf, f), order=jnp.zeros((nb, r), i32),
+        best=jnp.zeros((nb,), i32), raw_b=raw0[:, 0], code_b=jnp.zeros((nb,), i32), l2_b=jnp.zeros((nb,), f),
+        steps_b=jnp.zeros((nb,), i32), retry=jnp.zeros((nb,), bool), cand=jnp.zeros((nb, ncand, npar), f),
+        craw=jnp.zeros((nb, ncand, npar), f), ccode=jnp.zeros((nb, ncand), i32), csteps=jnp.zeros((nb, ncand), i32),
+        cl2=jnp.full((nb, ncand), jnp.inf, f),
     )
+    stage1_idx = lambda j: jnp.minimum(j * r + jnp.arange(r), ns - 1)  # noqa: E731  (padding repeats the last)
+    full = lambda n: jnp.full((nb, r), n, i32)  # noqa: E731
+
+    def pick_best(c):
+        best = _pick(c["sl2"], c["code"]).astype(i32)
+        return dict(c, best=best, raw_b=_at(c["raw"], best), code_b=_at(c["code"], best).astype(i32),
+                    steps_b=_at(c["steps"], best), l2_b=_at(c["sl2"], best))
+
+    def prep_a(j, c):
+        return c, c["raw"][:, stage1_idx(j)], full(max_steps if one_stage else stage_steps)
+
+    def prep_b(j, c):
+        order = jnp.argsort(c["sl2"], axis=1)[:, :r].astype(i32)
+        done = jnp.take_along_axis(c["code"], order, axis=1) == Result.OK
+        block = jnp.take_along_axis(c["raw"], order[..., None], axis=1)
+        return dict(c, order=order), block, jnp.where(done, 0, max(max_steps - stage_steps, 1)).astype(i32)
+
+    def prep_c(j, c):
+        sub = (j - (len(kinds) - per_round * _LIMIT_ROUNDS)) % per_round
+        snapped = [model.snap_to_limits(c["raw_b"], tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
+        retry = (c["code_b"] == Result.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
+        cand = jnp.stack([jnp.where(retry[:, None], s, c["raw_b"]) for s, _ in snapped], axis=1)
+        cand = jnp.concatenate([cand, jnp.repeat(cand[:, -1:], ncand - cand.shape[1], axis=1)], axis=1)
+        first = sub == 0  # a round's candidates are made by its first job
+        c = dict(c, cand=jnp.where(first, cand, c["cand"]), retry=jnp.where(first, retry, c["retry"]))
+        block = jax.lax.dynamic_slice_in_dim(c["cand"], sub * r, r, axis=1)
+        return c, block, jnp.where(c["retry"][:, None], limit_steps, 0).astype(i32) * jnp.ones((1, r), i32)
+
+    def store_a(j, c, res):
+        idx = stage1_idx(j)
+        c = dict(c, **{k: c[k].at[:, idx].set(a) for k, a in zip(("raw", "code", "steps", "sl2"), res)})
+        return jax.lax.cond(j == n_a - 1, pick_best, lambda c: c, c) if one_stage else c
+
+    def store_b(j, c, res):
+        raw2, code2, steps2, sl22 = res
+        order = c["order"]
+        take = lambda a: jnp.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa
+        d = take(c["code"]) == Result.OK  # converged in stage 1: keep its stage-1 state
+        c = dict(
+            c, raw=c["raw"].at[rows, order].set(jnp.where(d[..., None], take(c["raw"]), raw2)),
+            code=c["code"].at[rows, order].set(jnp.where(d, take(c["code"]), code2)),
+            steps=c["steps"].at[rows, order].set(take(c["steps"]) + jnp.where(d, 0, steps2)),
+            sl2=c["sl2"].at[rows, order].set(jnp.where(d, take(c["sl2"]), sl22)),
+        )
+        return pick_best(c)
+
+    def store_c(j, c, res):
+        sub = (j - (len(kinds) - per_round * _LIMIT_ROUNDS)) % per_round
+        c = dict(c, **{k: jax.lax.dynamic_update_slice_in_dim(c[k], a, sub * r, axis=1)
+                       for k, a in zip(("craw", "ccode", "csteps", "cl2"), res)})
+        ncand_real = len(_LIMIT_TOLS)
+        raw_p, code_p = c["craw"][:, :ncand_real], c["ccode"][:, :ncand_real]
+        steps_p, l2_p = c["csteps"][:, :ncand_real], c["cl2"][:, :ncand_real]
+        # the best candidate is kept if its L2 is no worse than before; its own status is reported
+        better = jnp.isfinite(l2_p) & (l2_p <= (c["l2_b"] * (1.0 + rtol) + atol * scale[:, 0])[:, None])
+        k = _pick(jnp.where(better, l2_p, jnp.inf), code_p)
+        at = functools.partial(_at, idx=k)
+        take_p = c["retry"] & at(better) & (sub == per_round - 1)  # a round is decided by its last job
+        spent = c["retry"] & (sub == per_round - 1)
+        return dict(
+            c, raw_b=jnp.where(take_p[:, None], at(raw_p), c["raw_b"]),
+            code_b=jnp.where(take_p, at(code_p), c["code_b"]),
+            l2_b=jnp.where(take_p, at(l2_p), c["l2_b"]), steps_b=c["steps_b"] + jnp.where(spent, at(steps_p), 0),
+        )
+
+    def job(j, c):
+        kind = jnp.asarray(kinds)[j]
+        c, block, budget = jax.lax.switch(kind, (prep_a, prep_b, prep_c), j, c)
+        res = _solve_block(model, u, v, y, sw, scale, block, budget, rtol, atol)  # the one solver loop
+        return jax.lax.switch(kind, (store_a, store_b, store_c), j, c, res)
+
+    c = jax.lax.fori_loop(0, len(kinds), job, carry0)
+    return finish(model, wc2, raw0, c)

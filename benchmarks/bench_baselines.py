@@ -37,7 +37,8 @@ def main():
     ap.add_argument("--n-starts", type=int, default=16)
     ap.add_argument("--stage-steps", type=int, default=None, help="baselines.fit stage_steps (default: fit's own)")
     ap.add_argument("--refine", type=int, default=None, help="baselines.fit refine (default: fit's own)")
-    ap.add_argument("--scipy-materials", type=int, default=None, help="materials for the scipy reference (default 52, quick 6)")
+    ap.add_argument("--scipy-materials", type=int, default=None,
+                    help="materials for the scipy reference (default 52, quick 6)")
     args = ap.parse_args()
     data = pj.data.load_curet(samples=pj.data.ISOTROPIC_52)
     nm = data.values.shape[0]
@@ -49,8 +50,8 @@ def main():
     print(f"CUReT {nm} isotropic samples x {data.values.shape[-1]} geometries; {args.n_starts} starts per material; "
           f"devices {jax.devices()}")
     if k_sc < nm:
-        print(f"scipy reference on {k_sc} of {nm} materials (indices {idx.tolist()}); its time per material is the mean "
-              "over those, extrapolated to all")
+        print(f"scipy reference on {k_sc} of {nm} materials (indices {idx.tolist()}); its time per material is the "
+              "mean over those, extrapolated to all")
     hdr = (f"{'model':18s} {'mean L2':>8s} {'median':>8s} {'not conv':>8s} {'compile s':>9s} {'ms/mat':>7s} "
            f"{'paper ms':>8s} {'x paper':>7s} {'scipy ms':>8s} {'x scipy':>7s} {'<=scipy':>8s}")
     print(hdr)
@@ -58,7 +59,7 @@ def main():
     all_ok, all_n = 0, 0
     fits = {}
     for name in bl.PAPER_MODELS:
-        fit, first, dt = timed(lambda: bl.fit(name, data, n_starts=args.n_starts, key=key, **opts), repeats)
+        fit, first, dt = timed(lambda name=name: bl.fit(name, data, n_starts=args.n_starts, key=key, **opts), repeats)
         fits[name] = fit
         per = dt / nm
         l2 = np.asarray(fit.l2)

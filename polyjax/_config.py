@@ -69,5 +69,6 @@ def data_file(relative: str, root: str | os.PathLike | None = None) -> Path:
     base = data_root(root)
     path = base / relative
     if not path.is_file():
-        raise DataNotFoundError(f"expected the file {relative!r} below the data root {str(base)!r}; looked at {str(path)!r}")
+        raise DataNotFoundError(
+            f"expected the file {relative!r} below the data root {str(base)!r}; looked at {str(path)!r}")
     return path

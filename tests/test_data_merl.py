@@ -5,7 +5,11 @@ import pytest
 
 import polyjax as pj
 from polyjax.data import (
-    EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError,
+    EmptyFileError,
+    HeaderError,
+    NonFiniteValueError,
+    TruncatedFileError,
+    WrongFormatError,
 )
 
 from _data_problems import SMALL_RES, smooth_table, write_small_merl

@@ -81,7 +81,8 @@ def test_batched_fit_equals_individual_fits_and_both_code_paths_agree():
     for j in range(3):
         single = pj.fit_polynomial(data.u, data.v, data.values[j], variables="ward", degree=6)
         np.testing.assert_allclose(np.asarray(batched.l2)[1, j], np.asarray(single.l2), rtol=1e-12)
-        np.testing.assert_allclose(np.asarray(batched[1, j].coefficients), np.asarray(single.coefficients), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(batched[1, j].coefficients), np.asarray(single.coefficients), rtol=1e-9,
+                                   atol=1e-12)
     # a per-material mask forces the per-lane path; masking nothing must give the shared path's answer
     mask = np.ones(data.values.shape, bool)
     kept = np.asarray(pj.cutoff_mask(data.u, data.v, 80.0))

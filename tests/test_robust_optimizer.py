@@ -66,7 +66,8 @@ def test_far_start_and_step_limit_reported_as_max_steps(problem):
 @pytest.mark.parametrize("backend, refine", [("optimistix", 1), ("optimistix", 2), ("jaxopt", 1)])
 def test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_stage_path(problem, backend, refine):
     """The same overflowing starts through the staged run (every start a few steps, then the
-    best one (the default) or two refined) on both backends: the finite start is kept, the others are NONFINITE with L2 inf."""
+    best one (the default) or two refined) on both backends: the finite start is kept, the others are NONFINITE
+    with L2 inf."""
     u, v, y, m = problem
     good = m.to_raw(jnp.asarray(TRUE_PARAMS[NAME])) + 0.3
     starts = jnp.stack([jnp.full((4,), 1e200), good, jnp.array([1e154, 1e154, 0.5, 0.5])])
