@@ -131,8 +131,6 @@ def test_log_fit_jvp_matches_finite_differences(geometry):
     np.testing.assert_allclose(float(t), float(fd), rtol=1e-5)
 
 
-@pytest.mark.xfail(reason="reverse mode through the closed-form solve (custom_vmap in polyjax/_linalg.py) is not "
-                          "available yet; fit_polynomial's own jax.grad fails the same way", strict=False)
 def test_log_fit_grad_matches_finite_differences(geometry):
     u, v = geometry
     b = _lobe(u, v)
