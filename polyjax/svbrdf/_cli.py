@@ -30,13 +30,14 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--size", type=int, default=64, help="texels per side (default 64)")
     p.add_argument("--lights", type=int, default=48, help="number of point lights of the capture (default 48)")
     p.add_argument("--materials", default="pink-fabric,pink-felt", help="comma-separated MERL names (neural fits)")
-    p.add_argument("--variables", default="lafortune")
-    p.add_argument("--degree", type=int, default=3)
+    p.add_argument("--variables", default="lafortune", help="explanatory variable set of the per-texel fits")
+    p.add_argument("--degree", type=int, default=3, help="polynomial degree p of the per-texel fits (default 3)")
     p.add_argument("--new-light", default="0.7,0.9,2.2", help="x,y,z of the re-rendering light")
     p.add_argument("--out", required=True, help="output folder of the texture shards and manifest")
     p.add_argument("--coordinator", default="localhost:12355", help="host:port of process 0 (several processes)")
-    p.add_argument("--num-processes", type=int, default=1)
-    p.add_argument("--process-id", type=int, default=0)
+    p.add_argument("--num-processes", type=int, default=1,
+                   help="processes of the jax.distributed run (default 1)")
+    p.add_argument("--process-id", type=int, default=0, help="this process's index, 0 .. num-processes - 1")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
     p.set_defaults(func=run_svbrdf)
     return p
