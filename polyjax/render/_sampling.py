@@ -218,13 +218,13 @@ class ImportanceSampler(eqx.Module):
         t = jnp.clip(s - j, 0.0, 1.0) if nv > 1 else jnp.zeros_like(s)
         return j, t
 
-    def _tables(self, dtype):
+    def _arrays(self, dtype):
         return tuple(jax.lax.stop_gradient(a).astype(dtype) for a in (self.density, self.prefix, self.row_cdf))
 
     def _square_density(self, j, sq):
         """``q_j`` at points ``sq`` of the unit square (bilinear interpolation of the node values)."""
         n = self.resolution
-        q, _, _ = self._tables(sq.dtype)
+        q, _, _ = self._arrays(sq.dtype)
         f = sq * n
         i = jnp.clip(jnp.floor(f), 0, n - 1).astype(jnp.int32)
         s = jnp.clip(f - i, 0.0, 1.0)
@@ -238,7 +238,7 @@ class ImportanceSampler(eqx.Module):
         (``xi_y``), then ``x`` from the piecewise-linear conditional (``xi_x``); module docstring, step 3."""
         n = self.resolution
         h = 1.0 / n
-        q, prefix, row_cdf = self._tables(xi_y.dtype)
+        q, prefix, row_cdf = self._arrays(xi_y.dtype)
         target = xi_y * row_cdf[j, n]
         a = _last_at_most(lambda i: row_cdf[j, i], n, target)
         r0, r1 = prefix[j, a, n], prefix[j, a + 1, n]
