@@ -57,7 +57,7 @@ SUB = 48  # quadrature points per bin side: the quadrature grid (BINS * SUB = TA
 def expected_frequencies(pdf):
     """Integral of ``pdf(w)`` over each bin, bins ``BINS x BINS`` cells of the square of the equal-area
     hemisphere map (``d omega = 2 pi dA``), by the midpoint rule on a grid aligned with the table cells
-    (exact for the tabulated part, which is constant on each sub-cell)."""
+    (exact for the tabulated part, which is bilinear on each sub-cell: the midpoint rule integrates it exactly)."""
     from polyjax.render._sampling import square_to_hemisphere
 
     m = BINS * SUB

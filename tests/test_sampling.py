@@ -116,7 +116,7 @@ def test_density_positive_where_brdf_positive_even_for_negative_models():
 
 def test_all_zero_brdf_falls_back_to_uniform_table():
     s = pr.importance_sampler(lambda u, v: jnp.zeros(u.shape[:-1]))
-    np.testing.assert_allclose(np.asarray(s.pmf), 1.0 / 64**2)
+    np.testing.assert_allclose(np.asarray(s.density), 1.0)
 
 
 def test_vmap_over_views_and_gradient_wrt_view():
@@ -144,3 +144,41 @@ def test_bad_arguments_raise():
         pr.importance_sampler(pr.Phong(), theta_max_deg=90.0)
     with pytest.raises(InputError, match="resolution"):
         pr.importance_sampler(pr.Phong(), resolution=0)
+
+
+def test_density_is_continuous_across_cell_edges():
+    """Points just either side of every cell edge of the table (in the square of the map): the density differs by
+    no more than its slope allows (a piecewise-constant table would jump by up to the whole lobe there)."""
+    s = pr.importance_sampler(cook_torrance(), resolution=TABLE)
+    edges = np.arange(1, TABLE) / TABLE
+    other = (np.arange(TABLE) + 0.37) / TABLE
+    E, O = np.meshgrid(edges, other)
+    for axis in (0, 1):
+        pts = np.stack([E, O] if axis == 0 else [O, E], -1).reshape(-1, 2)
+        step = np.zeros(2)
+        step[axis] = 1e-9
+        below = s.pdf(square_to_hemisphere(jnp.asarray(pts - step)), jnp.asarray(GRAZING))
+        above = s.pdf(square_to_hemisphere(jnp.asarray(pts + step)), jnp.asarray(GRAZING))
+        scale = float(jnp.max(below))
+        assert float(jnp.max(jnp.abs(above - below))) < 1e-5 * scale
+        assert scale > 10 * 0.1 / np.pi  # a lobe well above the cosine floor
+
+
+def test_bilinear_tables_integrate_the_interpolant():
+    """The normalisation, row integrals and row CDF are exact for the bilinear interpolant of the nodes."""
+    from polyjax.render._sampling import bilinear_tables
+
+    n = 6
+    g = jnp.asarray(np.random.default_rng(0).random((n + 1, n + 1)))
+    q, prefix, row_cdf = bilinear_tables(g)
+    m = 600  # midpoint rule on sub-cells: exact for a bilinear function on each cell
+    c = (np.arange(m) + 0.5) / m
+    f = (c * n) - np.clip(np.floor(c * n), 0, n - 1)
+    i = np.clip(np.floor(c * n), 0, n - 1).astype(int)
+    Q = np.asarray(q)
+    rows_x = (1 - f)[None, :] * Q[:, i] + f[None, :] * Q[:, i + 1]  # q at row nodes, x on the midpoints
+    np.testing.assert_allclose(np.asarray(prefix[:, -1]), rows_x.mean(axis=1), rtol=1e-12)
+    full = (1 - f)[:, None] * rows_x[i] + f[:, None] * rows_x[i + 1]
+    np.testing.assert_allclose(full.mean(), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(float(row_cdf[-1]), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(row_cdf[3]), full[: m // 2].mean() / 2, rtol=1e-12)

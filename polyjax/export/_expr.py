@@ -22,6 +22,7 @@ import numpy as np
 from .._basis import exponents
 from .._errors import InputError
 from .._model import PolynomialBRDF
+from ..render._brdf import transported
 
 INPUTS = ("ux", "uy", "uz", "vx", "vy", "vz")
 OUTPUTS = ("out_r", "out_g", "out_b")
@@ -63,6 +64,11 @@ def div(a, b):
 def call(fn: str, *args):
     """``fn`` in ``sqrt, max`` (two arguments) or ``exp``."""
     return ("call", fn, *args)
+
+
+def transported_expression(f):
+    """``max(f, 0)`` as an expression: :func:`polyjax.render._brdf.transported` with this program's ``max``."""
+    return transported(f, maximum=lambda a, b: call("max", a, b), zero=const(0.0))
 
 
 def where_positive(a, b, value):
@@ -283,9 +289,9 @@ def polynomial_program(model: PolynomialBRDF) -> Program:
     lanes = [_channel(prog, model, c, x) for c in range(int(np.prod(bs, dtype=int)))]
     if len(lanes) == 1:
         lanes = lanes * 3
-    # clamped at 0 like the renderer's light transport (polyjax.render.evaluate_rgb): a fitted polynomial may dip
-    # below 0, and a shader or a renderer must never transport negative radiance
-    prog.output([where_positive(var("uz"), var("vz"), call("max", f, const(0.0))) for f in lanes])
+    # clamped at 0 by the renderer's definition of light transport: a fitted polynomial may dip below 0, and a
+    # shader or a renderer must never transport negative radiance
+    prog.output([where_positive(var("uz"), var("vz"), transported_expression(f)) for f in lanes])
     return prog
 
 

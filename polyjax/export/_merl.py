@@ -64,7 +64,7 @@ def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) ->
         The path written. Not differentiable (file output); :func:`tabulate_merl` is.
     """
     vals, above = tabulate_merl(brdf, resolution)
-    vals = np.maximum(np.asarray(vals, np.float64), 0.0)
+    vals = np.asarray(vals, np.float64)  # max(f, 0) already: tabulate_merl evaluates through evaluate_rgb
     mask = np.broadcast_to(above, vals.shape) & np.isfinite(vals)
     return write_merl_binary(path, vals, resolution=resolution, mask=mask)
 

@@ -4,17 +4,19 @@ r"""A Mitsuba 3 BSDF plugin for polyjax models, written in Python with Dr.Jit (v
 ``bsdf = pj.export.mitsuba_bsdf(model)`` registers a plugin (default name ``"polyjax"``) and returns the
 instance; ``mi.load_dict({"type": "polyjax"})`` then builds it inside scenes. Conventions: Mitsuba's local
 ``si.wi`` (towards the viewer) is polyjax's view ``v``, ``wo`` the light ``u``; ``eval`` returns
-``f(u, v) cos theta_u`` (RGB), 0 unless both are above the surface (one-sided, glossy reflection).
+``max(f(u, v), 0) cos theta_u`` (RGB), 0 unless both are above the surface (one-sided, glossy reflection).
 
 - **Evaluation**: a polynomial model or a ``NeuralBRDF`` is the Dr.Jit print of the one program of
   :mod:`polyjax.export._expr` (the same arithmetic as the GLSL and numpy exports), so Mitsuba evaluates the model
-  itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated on the MERL grid
-  (:func:`tabulate_merl`, 90 x 90 x 180 Rusinkiewicz bins) and looked up at the nearest bin centre, an
-  approximation at MERL's resolution.
+  itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated at the nodes of the MERL grid
+  (:func:`tabulate_merl`, 90 x 90 x 180 Rusinkiewicz bins) and interpolated trilinearly in the bin coordinates
+  (``sqrt`` of ``theta_h``, ``theta_d``, ``phi_d`` periodic), nodes with a direction below the horizon left out
+  of the weights: continuous, an approximation at MERL's resolution.
 - **Sampling**: the tables of :class:`polyjax.render.ImportanceSampler` (same map, mixture and density as
   polyjax's own sampler, :mod:`polyjax.render._sampling`), so ``pdf`` is exactly the density ``sample`` draws
-  from: ``sample1`` chooses the cosine component (probability ``alpha``), then is rescaled to choose the view
-  node and the cell (a per-lane binary search over the cell CDF); ``sample2`` places the point in the cell.
+  from, up to float32: ``sample1`` chooses the cosine component (probability ``alpha``), then is rescaled to
+  choose the view node; ``sample2`` draws the point of the square by the same inversion (``y`` from the
+  marginal, ``x`` from the conditional, a per-lane binary search and a quadratic solve each).
 
 Mitsuba is an optional dependency (``pip install mitsuba``); a variant must be set (``mi.set_variant``) before
 calling. Not differentiable w.r.t. the model from Mitsuba (its parameters are baked in as constants).
@@ -46,7 +48,8 @@ def _mitsuba():
 
 
 class _Table:
-    """A float table usable from scalar and JIT variants: ``table[index]`` for Dr.Jit or Python indices."""
+    """A float table usable from scalar and JIT variants: ``table[index]`` for Dr.Jit or Python indices, or for
+    floats holding whole numbers (converted to ``UInt32``)."""
 
     def __init__(self, mi, dr, values):
         self.scalar = mi.Float is float
@@ -57,99 +60,183 @@ class _Table:
     def __getitem__(self, index):
         if self.scalar:
             return float(self.np[int(index)])
+        if not isinstance(index, self.mi.UInt32):
+            index = self.mi.UInt32(index)
         return self.dr.gather(self.mi.Float, self.dr_array, index)
 
 
+# --------------------------------------------------------------------------- evaluation of tabulated models
+
+
+def _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz):
+    """``(theta_h, theta_d, phi_d)`` of light ``u`` and view ``v`` in Dr.Jit, ``phi_d`` folded into ``[0, pi)``
+    (the MERL convention: ``f`` is symmetric under ``phi_d -> phi_d + pi``)."""
+    hx, hy, hz = ux + vx, uy + vy, uz + vz
+    inv = dr.rsqrt(dr.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
+    hx, hy, hz = hx * inv, hy * inv, hz * inv
+    th = dr.acos(dr.clip(hz, -1.0, 1.0))
+    rh = dr.sqrt(dr.maximum(hx * hx + hy * hy, 0.0))
+    safe = dr.select(rh > 1e-12, rh, 1.0)
+    cp, sp = dr.select(rh > 1e-12, hx / safe, 1.0), dr.select(rh > 1e-12, hy / safe, 0.0)
+    x, y = cp * ux + sp * uy, -sp * ux + cp * uy
+    ct, st = dr.cos(th), dr.sin(th)
+    dx, dz = x * ct - uz * st, x * st + uz * ct
+    td = dr.atan2(dr.sqrt(dx * dx + y * y), dz)
+    pd = dr.atan2(y, dx)
+    pd = dr.select(pd < 0, pd + dr.pi, pd)
+    return th, td, pd
+
+
 def _tabulated_eval(mi, dr, brdf):
-    """Nearest-bin lookup in the MERL tabulation of ``brdf`` (Rusinkiewicz angles in Dr.Jit)."""
+    """Trilinear interpolation of the MERL tabulation of ``brdf`` (module docstring), in Dr.Jit.
+
+    Node ``(i, j, k)`` sits at ``theta_h = (i / N_h)^2 pi / 2``, ``theta_d = j / N_d pi / 2``, ``phi_d = k / N_p
+    pi`` (the bin angles of :func:`polyjax.data.merl_grid`), so the coordinates are ``sqrt(theta_h / (pi / 2))
+    N_h``, ``theta_d / (pi / 2) N_d`` (both clamped to the grid) and ``phi_d / pi N_p`` (periodic). The value is
+    ``sum_c w_c m_c f_c / sum_c w_c m_c`` over the 8 corners, ``w`` the trilinear weights and ``m`` 1 where both
+    directions of the node are above the horizon (``f`` is then ``max(f, 0)`` there) and 0 elsewhere.
+    """
     from ..data._merl import MERL_RESOLUTION
     from ._merl import tabulate_merl
 
     nh, nd, npd = MERL_RESOLUTION
-    vals, _ = tabulate_merl(brdf)
-    tables = [_Table(mi, dr, np.maximum(np.asarray(c), 0.0)) for c in vals]
+    vals, above = tabulate_merl(brdf)
+    vals = np.where(above[None], np.asarray(vals, np.float64), 0.0)
+    tables = [_Table(mi, dr, c) for c in vals] + [_Table(mi, dr, above.astype(np.float64))]
+
+    def axis(c, n, periodic):
+        c0 = dr.floor(c)
+        w = c - c0
+        if periodic:
+            c0 = dr.select(c0 >= n, c0 - n, c0)
+            return (c0, dr.select(c0 + 1 >= n, c0 + 1 - n, c0 + 1)), w
+        c0 = dr.clip(c0, 0, n - 2)
+        return (c0, c0 + 1), dr.clip(c - c0, 0.0, 1.0)
 
     def f(ux, uy, uz, vx, vy, vz):
-        hx, hy, hz = ux + vx, uy + vy, uz + vz
-        inv = dr.rsqrt(dr.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
-        th = dr.acos(dr.clip(hz, -1.0, 1.0))
-        rh = dr.sqrt(dr.maximum(hx * hx + hy * hy, 0.0))
-        safe = dr.select(rh > 1e-12, rh, 1.0)
-        cp, sp = dr.select(rh > 1e-12, hx / safe, 1.0), dr.select(rh > 1e-12, hy / safe, 0.0)
-        x, y = cp * ux + sp * uy, -sp * ux + cp * uy
-        ct, st = dr.cos(th), dr.sin(th)
-        dx, dz = x * ct - uz * st, x * st + uz * ct
-        td = dr.atan2(dr.sqrt(dx * dx + y * y), dz)
-        pd = dr.atan2(y, dx)
-        pd = dr.select(pd < 0, pd + dr.pi, pd)
-        i = dr.clip(dr.floor(dr.sqrt(dr.maximum(th, 0.0) / (dr.pi / 2)) * nh + 1e-6), 0, nh - 1)
-        j = dr.clip(dr.floor(td / (dr.pi / 2) * nd + 1e-6), 0, nd - 1)
-        k = dr.clip(dr.floor(pd / dr.pi * npd + 1e-6), 0, npd - 1)
-        if mi.Float is float:
-            idx = int(k) + npd * (int(j) + nd * int(i))
-        else:
-            idx = mi.UInt32(k) + npd * (mi.UInt32(j) + nd * mi.UInt32(i))
-        ok = (uz > 0) & (vz > 0)
-        return tuple(dr.select(ok, t[idx], 0.0) for t in tables)
+        th, td, pd = _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz)
+        (i0, i1), wi = axis(dr.sqrt(dr.maximum(th, 0.0) / (dr.pi / 2)) * nh, nh, False)
+        (j0, j1), wj = axis(dr.clip(td, 0.0, dr.pi / 2) / (dr.pi / 2) * nd, nd, False)
+        (k0, k1), wk = axis(dr.clip(pd, 0.0, dr.pi) / dr.pi * npd, npd, True)
+        acc = [0.0 * wi for _ in tables]
+        for i, a in ((i0, 1.0 - wi), (i1, wi)):
+            for j, b in ((j0, 1.0 - wj), (j1, wj)):
+                for k, c in ((k0, 1.0 - wk), (k1, wk)):
+                    idx = k + npd * (j + nd * i)
+                    w = a * b * c
+                    acc = [s + w * t[idx] for s, t in zip(acc, tables)]
+        norm = acc[3]
+        ok = (uz > 0) & (vz > 0) & (norm > 0)
+        return tuple(dr.select(ok, s / dr.select(norm > 0, norm, 1.0), 0.0) for s in acc[:3])
 
     return f
 
 
-def _make_class(mi, dr, evaluate, sampler: ImportanceSampler):
+# --------------------------------------------------------------------------- the sampler in Dr.Jit
+
+
+def _last_at_most(dr, value_at, n: int, x):
+    """Dr.Jit twin of ``polyjax.render._sampling._last_at_most`` (indices as whole-number floats)."""
+    lo, hi = 0.0 * x, 0.0 * x + n
+    for _ in range(int(np.ceil(np.log2(max(n, 1))))):
+        mid = dr.floor((lo + hi) * 0.5)
+        go = value_at(mid) <= x
+        lo, hi = dr.select(go, mid, lo), dr.select(go, hi, mid)
+    return lo
+
+
+def _invert_linear(dr, d0, d1, t):
+    """Dr.Jit twin of ``polyjax.render._sampling._invert_linear``."""
+    den = d0 + dr.sqrt(dr.maximum(d0 * d0 + 2.0 * (d1 - d0) * t, 0.0))
+    return dr.clip(dr.select(den > 0, 2.0 * t / dr.select(den > 0, den, 1.0), 0.0), 0.0, 1.0)
+
+
+def _sampler_functions(mi, dr, sampler: ImportanceSampler):
+    """``(node, density, draw)``: the view node and weight of ``wi``, the density of ``wo`` for ``wi``, and
+    ``draw(jj, xi_y, xi_x)`` a point of the square from the table of node ``jj``; the methods of
+    :class:`ImportanceSampler` on its tables, in Dr.Jit."""
     nv, n = sampler.n_views, sampler.resolution
-    n2 = n * n
-    pmf = _Table(mi, dr, sampler.pmf)
-    cdf = _Table(mi, dr, sampler.cdf)
+    n1 = n + 1
+    q, prefix, row_cdf = (_Table(mi, dr, a) for a in (sampler.density, sampler.prefix, sampler.row_cdf))
     alpha, theta_max = float(sampler.alpha), float(sampler.theta_max)
-    steps = int(np.ceil(np.log2(n2))) + 1
-    scalar = mi.Float is float
-    to_uint = (lambda x: int(x)) if scalar else mi.UInt32
 
     def node(wi):
-        theta = dr.acos(dr.clip(wi.z, -1.0, 1.0))
-        s = dr.clip(theta / theta_max, 0.0, 1.0) * (nv - 1)
+        s = dr.clip(dr.acos(dr.clip(wi.z, -1.0, 1.0)) / theta_max, 0.0, 1.0) * (nv - 1)
         j = dr.clip(dr.floor(s), 0, max(nv - 2, 0))
-        t = dr.clip(s - j, 0.0, 1.0) if nv > 1 else 0.0 * s
-        return j, t
+        return j, (dr.clip(s - j, 0.0, 1.0) if nv > 1 else 0.0 * s)
 
-    def azimuth(wi):
-        r2 = wi.x * wi.x + wi.y * wi.y
-        ok = r2 > 1e-20
-        r = dr.sqrt(dr.select(ok, r2, 1.0))
-        return dr.select(ok, wi.x / r, 1.0), dr.select(ok, wi.y / r, 0.0)
+    def square_density(j, x, y):
+        ix, iy = dr.clip(dr.floor(x * n), 0, n - 1), dr.clip(dr.floor(y * n), 0, n - 1)
+        sx, sy = dr.clip(x * n - ix, 0.0, 1.0), dr.clip(y * n - iy, 0.0, 1.0)
+        base = (j * n1 + iy) * n1 + ix
+        lower = (1.0 - sx) * q[base] + sx * q[base + 1]
+        upper = (1.0 - sx) * q[base + n1] + sx * q[base + n1 + 1]
+        return (1.0 - sy) * lower + sy * upper
 
     def density(wi, wo):
-        c, s = azimuth(wi)
+        c, s = _azimuth(dr, wi)
         lx, ly = c * wo.x + s * wo.y, -s * wo.x + c * wo.y
         sq = mi.warp.uniform_hemisphere_to_square(mi.Vector3f(lx, ly, dr.maximum(wo.z, 0.0)))
-        ix = dr.clip(dr.floor(sq.x * n), 0, n - 1)
-        iy = dr.clip(dr.floor(sq.y * n), 0, n - 1)
         j, t = node(wi)
         j1 = dr.minimum(j + 1, nv - 1)
-        cell = iy * n + ix
-        p = (1.0 - t) * pmf[to_uint(j * n2 + cell)] + t * pmf[to_uint(j1 * n2 + cell)]
-        tab = p * (n2 / (2.0 * dr.pi))
-        pdf = alpha * dr.maximum(wo.z, 0.0) / dr.pi + (1.0 - alpha) * tab
+        tab = (1.0 - t) * square_density(j, sq.x, sq.y) + t * square_density(j1, sq.x, sq.y)
+        pdf = alpha * dr.maximum(wo.z, 0.0) / dr.pi + (1.0 - alpha) / (2.0 * dr.pi) * tab
         return dr.select((wo.z > 0) & (wi.z > 0), pdf, 0.0)
 
-    def value(wi, wo):
-        r, g, b = evaluate(wo.x, wo.y, wo.z, wi.x, wi.y, wi.z)
-        cos = dr.maximum(wo.z, 0.0)
-        ok = (wo.z > 0) & (wi.z > 0)
-        return mi.Color3f(dr.select(ok, r * cos, 0.0), dr.select(ok, g * cos, 0.0), dr.select(ok, b * cos, 0.0))
+    def draw(jj, xi_y, xi_x):
+        target = xi_y * row_cdf[jj * n1 + n]
+        a = _last_at_most(dr, lambda i: row_cdf[jj * n1 + i], n, target)
+        row0, row1 = (jj * n1 + a) * n1, (jj * n1 + a + 1) * n1
+        r0, r1 = prefix[row0 + n], prefix[row1 + n]
+        sy = _invert_linear(dr, r0, r1, (target - row_cdf[jj * n1 + a]) * n)
 
-    def search(base, x):
-        """Per lane: the first cell of row ``base`` (offset ``base * n2``) whose CDF exceeds ``x``."""
-        first = to_uint(base * n2)
-        count = to_uint(0 * base + n2)
-        for _ in range(steps):
-            step = count // 2
-            it = first + step
-            go = (cdf[dr.minimum(it, to_uint(nv * n2 - 1))] <= x) & (count > 0)
-            first = dr.select(go, it + 1, first)
-            count = dr.select(go, count - step - 1, step)
-        return dr.minimum(first - to_uint(base * n2), n2 - 1)
+        def blend(table, b):
+            return (1.0 - sy) * table[row0 + b] + sy * table[row1 + b]
+
+        target = xi_x * ((1.0 - sy) * r0 + sy * r1)
+        b = _last_at_most(dr, lambda i: blend(prefix, i), n, target)
+        sx = _invert_linear(dr, blend(q, b), blend(q, b + 1), (target - blend(prefix, b)) * n)
+        return mi.Point2f((b + sx) / n, (a + sy) / n)
+
+    return node, density, draw
+
+
+def _azimuth(dr, wi):
+    """``(cos phi, sin phi)`` of the view ``wi`` (``(1, 0)`` at the normal)."""
+    r2 = wi.x * wi.x + wi.y * wi.y
+    ok = r2 > 1e-20
+    r = dr.sqrt(dr.select(ok, r2, 1.0))
+    return dr.select(ok, wi.x / r, 1.0), dr.select(ok, wi.y / r, 0.0)
+
+
+def _sample_direction(mi, dr, sampler: ImportanceSampler):
+    """``wo = sample(wi, sample1, sample2)``: :meth:`ImportanceSampler.warp` with Mitsuba's uniforms (``sample1``
+    picks the component, then, rescaled, the view node; ``sample2`` the point)."""
+    node, _, draw = _sampler_functions(mi, dr, sampler)
+    alpha, nv = float(sampler.alpha), sampler.n_views
+
+    def sample(wi, sample1, sample2):
+        x = (sample1 - alpha) / (1.0 - alpha) if alpha < 1.0 else sample1
+        j, t = node(wi)
+        up = x < t
+        jj = dr.select(up, dr.minimum(j + 1, nv - 1), j)
+        loc = mi.warp.square_to_uniform_hemisphere(draw(jj, sample2.y, sample2.x))
+        c, s = _azimuth(dr, wi)
+        w_tab = mi.Vector3f(c * loc.x - s * loc.y, s * loc.x + c * loc.y, loc.z)
+        return dr.select(sample1 < alpha, mi.warp.square_to_cosine_hemisphere(sample2), w_tab)
+
+    return sample
+
+
+def _make_class(mi, dr, evaluate, sampler: ImportanceSampler):
+    """The ``mi.BSDF`` subclass evaluating ``evaluate`` (six Dr.Jit coordinates to RGB) and sampling ``sampler``."""
+    _, density, _ = _sampler_functions(mi, dr, sampler)
+    draw = _sample_direction(mi, dr, sampler)
+
+    def value(wi, wo):
+        ok = (wo.z > 0) & (wi.z > 0)
+        cos = dr.maximum(wo.z, 0.0)
+        return mi.Color3f(*(dr.select(ok, c * cos, 0.0) for c in evaluate(wo.x, wo.y, wo.z, wi.x, wi.y, wi.z)))
 
     class PolyjaxBSDF(mi.BSDF):
         def __init__(self, props):
@@ -159,31 +246,13 @@ def _make_class(mi, dr, evaluate, sampler: ImportanceSampler):
             self.m_flags = flags
 
         def sample(self, ctx, si, sample1, sample2, active=True):
-            wi = si.wi
-            use_cos = sample1 < alpha
-            x = (sample1 - alpha) / (1.0 - alpha) if alpha < 1.0 else sample1
-            j, t = node(wi)
-            up = x < t
-            x = dr.select(up, x / dr.maximum(t, 1e-12), (x - t) / dr.maximum(1.0 - t, 1e-12))
-            jj = dr.select(up, dr.minimum(j + 1, nv - 1), j)
-            cell = search(jj, dr.clip(x, 0.0, 1.0))
-            cx, cy = cell % n, cell // n
-            sq = mi.Point2f((cx + sample2.x) / n, (cy + sample2.y) / n)
-            loc = mi.warp.square_to_uniform_hemisphere(sq)
-            c, s = azimuth(wi)
-            w_tab = mi.Vector3f(c * loc.x - s * loc.y, s * loc.x + c * loc.y, loc.z)
-            w_cos = mi.warp.square_to_cosine_hemisphere(sample2)
-            wo = dr.select(use_cos, w_cos, w_tab)
-            pdf = density(wi, wo)
+            wo = draw(si.wi, sample1, sample2)
             bs = mi.BSDFSample3f()
-            bs.wo = wo
-            bs.pdf = pdf
-            bs.eta = 1.0
+            bs.wo, bs.pdf, bs.eta = wo, density(si.wi, wo), 1.0
             bs.sampled_component = mi.UInt32(0)
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            ok = (pdf > 0) & (wi.z > 0)
-            weight = value(wi, wo) / dr.select(ok, pdf, 1.0)
-            return bs, dr.select(ok, weight, mi.Color3f(0.0))
+            ok = (bs.pdf > 0) & (si.wi.z > 0)
+            return bs, dr.select(ok, value(si.wi, wo) / dr.select(ok, bs.pdf, 1.0), mi.Color3f(0.0))
 
         def eval(self, ctx, si, wo, active=True):
             return value(si.wi, wo)

@@ -6,9 +6,9 @@ direction ``v`` as ``(..., 3)`` unit vectors in the local shading frame (normal 
 broadcast to the three channels). Fitted models, measured data and analytic BRDFs are all
 wrapped into this one protocol by :func:`rgb_brdf`.
 
-Light transport uses ``max(f, 0)`` (:func:`evaluate_rgb`): a fitted model (a polynomial, above all) can
-be negative where the data has a narrow peak or no samples, and a negative BRDF would emit negative
-radiance. The model's own values (``model(u, v)``) are not clamped.
+Light transport uses ``max(f, 0)`` (:func:`transported`, applied by :func:`evaluate_rgb`): a fitted model (a
+polynomial, above all) can be negative where the data has a narrow peak or no samples, and a negative BRDF would
+emit negative radiance. The model's own values (``model(u, v)``) are not clamped.
 """
 
 from __future__ import annotations
@@ -32,6 +32,19 @@ def _above(u, v):
     return (u[..., 2] > 0) & (v[..., 2] > 0)
 
 
+def transported(f, maximum=jnp.maximum, zero=0.0):
+    """The BRDF light is transported with, ``max(f, 0)``: the one definition behind the renderer
+    (:func:`evaluate_rgb`), the importance sampler's tables (through :func:`evaluate_rgb`) and every export (the
+    expression program of :mod:`polyjax.export._expr` calls it with its own ``max`` and constant 0).
+
+    Args:
+        f: BRDF values (any array, or an expression of the export program).
+        maximum: the two-argument maximum of ``f``'s kind (``jnp.maximum`` for arrays).
+        zero: the 0 of ``f``'s kind.
+    """
+    return maximum(f, zero)
+
+
 def evaluate_rgb(brdf: BRDF, u: Array, v: Array) -> Float[Array, "... 3"]:
     """Evaluate ``brdf``, bring the result to ``(..., 3)`` and clamp it at 0: ``max(f(u, v), 0)``.
 
@@ -48,9 +61,9 @@ def evaluate_rgb(brdf: BRDF, u: Array, v: Array) -> Float[Array, "... 3"]:
     shape = jnp.broadcast_shapes(u.shape, v.shape)[:-1]
     out = jnp.asarray(brdf(u, v))
     if out.shape == shape + (3,):
-        return jnp.maximum(out, 0.0)
+        return transported(out)
     if out.shape == shape:
-        return jnp.broadcast_to(jnp.maximum(out, 0.0)[..., None], shape + (3,))
+        return jnp.broadcast_to(transported(out)[..., None], shape + (3,))
     raise InputError(
         f"brdf {type(brdf).__name__}: expected an output of shape {shape + (3,)} (RGB) or {shape} (grey) "
         f"for directions of shape {shape + (3,)}, found {out.shape}; wrap models with a leading channel "
