@@ -52,11 +52,43 @@ def test_texels_recover_their_material(capture_fit):
 
 
 @pytest.mark.data
-@pytest.mark.xfail(strict=True, reason="not met: 1.10 to 1.61; one fixed "
-                   "view leaves uz vz > cos(theta_v) unobserved and the fit extrapolates there (docs/scale.md)")
+@pytest.mark.xfail(strict=True, reason="not met: 1.10 to 1.61 (48 lights), 1.09 to 1.58 with 1500 lights down to "
+                   "1 degree elevation; one fixed view reaches uz vz <= cos(theta_v), |ux vx + uy vy| <= sin(theta_v) "
+                   "only (16-27% of equation (11)'s weight is outside; every view's MERL data inside that part fit to "
+                   "1.04-1.27x on the whole grid) and sees one slice of the BRDF there; lights, weighting, PCA, "
+                   "variables, degree and camera examined in docs/scale.md")
 def test_texels_recover_their_material_within_target(capture_fit):
     """The issue's target: every texel within 1.2x."""
     assert np.all(_recovery_ratios(capture_fit) <= 1.2)
+
+
+@pytest.mark.data
+def test_one_view_region_costs_the_target(capture_fit):
+    """Part of why the 1.2x target is not met from one view. A texel seen from ``theta_v`` has Lafortune variables
+    ``x1 = ux vx + uy vy`` and ``x2 = uz vz`` only in ``|x1| <= sin theta_v``, ``x2 <= cos theta_v`` whatever the
+    lights (16-27% of equation (11)'s weight lies outside). Fitting the blend's own MERL-grid data (every view
+    direction, far more than one view's slice) restricted to that part of the domain, and measuring equation (11)
+    on the whole grid, gives 1.04-1.27x: the domain alone exceeds 1.2x for 4 of the 15 texel channels. The rest of
+    the gap to the capture's 1.10-1.61x is the slice itself: one view sees one curve of values at each ``(x1, x2)``
+    where the grid fit averages over every view (the BRDF is not a function of the two variables)."""
+    mats, cap, _ = capture_fit
+    grid = pj.data.load_merl_nbrdf(list(MATERIALS), subsample=20000)
+    a = np.asarray(cap.blend)
+    truth = np.stack([sum(a[i, j, m] * grid.values[m] for m in range(len(mats))) for i, j in TEXELS])  # (5, 3, n)
+    x = np.asarray(pj.get_variables(VARIABLES)(grid.u, grid.v))
+    cos_v = np.array([float(svbrdf.directions(cap.positions[i, j], cap.lights, cap.camera)[1][2]) for i, j in TEXELS])
+    seen = (x[None, :, 1] <= cos_v[:, None]) & (np.abs(x[None, :, 0]) <= np.sqrt(1 - cos_v[:, None] ** 2))
+    ok = (np.asarray(grid.u)[:, 2] >= np.cos(np.radians(80))) & (np.asarray(grid.v)[:, 2] >= np.cos(np.radians(80)))
+    wc2 = np.asarray(grid.weights) * np.asarray(grid.u)[:, 2] ** 2 * ok
+    outside = 1 - (seen * wc2).sum(-1) / wc2.sum()
+    assert np.all((outside > 0.15) & (outside < 0.28)), outside  # 0.16 - 0.27 of equation (11)'s weight unseen
+    own = pj.fit_polynomial(grid.u, grid.v, truth, VARIABLES, DEGREE, weights=grid.weights)
+    part = pj.fit_polynomial(grid.u, grid.v, truth, VARIABLES, DEGREE, weights=grid.weights,
+                             mask=np.broadcast_to(seen[:, None], truth.shape))
+    ratio = np.asarray(pj.l2_error(truth, part(grid.u, grid.v), grid.u, grid.v, weights=grid.weights)) / own.l2
+    assert ratio.shape == (5, 3) and np.all(ratio >= 1.0), ratio
+    # measured 1.04 - 1.27: texel (5, 1) (all channels) and (0, 0) (G) above 1.2 from the domain alone
+    assert np.sum(ratio > 1.2) >= 3 and ratio.max() > 1.25 and np.median(ratio) < 1.2, ratio
 
 
 @pytest.mark.data
