@@ -192,6 +192,14 @@ def test_texture_shards_exr_round_trip(tmp_path):
                                rtol=1e-13)
     part = svbrdf.read_texture_shards(tmp_path, rows=(1, 3), format="exr")
     np.testing.assert_array_equal(part.coefficients, back.coefficients[1:3])
+    grey = model[:, :, 1]  # batch (H, W): no colour axis, channels named by index
+    meta = json.loads(svbrdf.write_texture_shards(tmp_path / "grey", grey, formats="exr").read_text())
+    assert meta["fields"]["coefficients"]["exr"]["channels"][:2] == ["coefficients.0", "coefficients.1"]
+    assert meta["fields"]["l2"]["exr"] == dict(encoding="float64-hi-lo-float32", channels=["l2"],
+                                               lo_channels=["l2.lo"])
+    g = svbrdf.read_texture_shards(tmp_path / "grey")
+    assert g.batch_shape == (4, 6)
+    np.testing.assert_allclose(g.rotation, grey.rotation, rtol=2.0**-48, atol=0)
 
 
 def test_texture_shards_exr_float32_and_errors(tmp_path):
