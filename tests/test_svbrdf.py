@@ -222,6 +222,11 @@ def test_texture_shards_exr_float32_and_errors(tmp_path):
         svbrdf.write_texture_shards(tmp_path / "y", huge, formats="exr")
     with pytest.raises(pj.InputError, match=r"format: expected one of the formats written, \['exr'\]"):
         svbrdf.read_texture_shards(tmp_path / "f32", format="npz")
+    bad = dict(meta, format="polyjax-texture-shards/9")
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / svbrdf.MANIFEST).write_text(json.dumps(bad))
+    with pytest.raises(pj.DataFormatError, match="expected format 'polyjax-texture-shards/2', found "):
+        svbrdf.read_texture_shards(tmp_path / "bad")
     (tmp_path / "f32" / "rows-0-4.exr").write_bytes(b"not an exr")
     with pytest.raises(pj.DataFormatError, match="an OpenEXR texture shard"):
         svbrdf.read_texture_shards(tmp_path / "f32")
