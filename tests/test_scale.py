@@ -171,7 +171,7 @@ def load_rows(start, stop):  # this process's part of the texture, and nothing e
     return dict(u=u, v=v, values=b, weights=w)
 
 model = svbrdf.fit_rows_distributed(load_rows, H, "lafortune", 3)
-svbrdf.write_texture_shards(out, model)
+svbrdf.write_texture_shards(out, model, formats=("npz", "exr"))
 print("RESULT " + __import__("json").dumps(dict(
     process=jax.process_index(), count=jax.process_count(), devices=len(model.coefficients.sharding.device_set),
     rows=list(svbrdf.local_rows(H)), local=len(model.coefficients.addressable_shards),
@@ -221,3 +221,8 @@ def test_two_process_distributed_fit_writes_its_shards(tmp_path):
     np.testing.assert_array_equal(got.status, ref.status)
     half = svbrdf.read_texture_shards(tmp_path / "tex", rows=(4, 8))
     np.testing.assert_allclose(half.coefficients, ref.coefficients[4:], rtol=1e-12, atol=1e-12)
+    # the EXR shards each process wrote beside its npz: the same texture within float64-as-two-float32 precision
+    assert [s["files"]["exr"] for s in meta["shards"]] == ["rows-0-4.exr", "rows-4-8.exr"]
+    exr = svbrdf.read_texture_shards(tmp_path / "tex", format="exr")
+    np.testing.assert_allclose(exr.coefficients, got.coefficients, rtol=2.0**-48, atol=0)
+    np.testing.assert_array_equal(exr.status, ref.status)

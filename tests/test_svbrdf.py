@@ -52,11 +52,43 @@ def test_texels_recover_their_material(capture_fit):
 
 
 @pytest.mark.data
-@pytest.mark.xfail(strict=True, reason="not met: 1.10 to 1.61; one fixed "
-                   "view leaves uz vz > cos(theta_v) unobserved and the fit extrapolates there (docs/scale.md)")
+@pytest.mark.xfail(strict=True, reason="not met: 1.10 to 1.61 (48 lights), 1.09 to 1.58 with 1500 lights down to "
+                   "1 degree elevation; one fixed view reaches uz vz <= cos(theta_v), |ux vx + uy vy| <= sin(theta_v) "
+                   "only (16-27% of equation (11)'s weight is outside; every view's MERL data inside that part fit to "
+                   "1.04-1.27x on the whole grid) and sees one slice of the BRDF there; lights, weighting, PCA, "
+                   "variables, degree and camera examined in docs/scale.md")
 def test_texels_recover_their_material_within_target(capture_fit):
     """The issue's target: every texel within 1.2x."""
     assert np.all(_recovery_ratios(capture_fit) <= 1.2)
+
+
+@pytest.mark.data
+def test_one_view_region_costs_the_target(capture_fit):
+    """Part of why the 1.2x target is not met from one view. A texel seen from ``theta_v`` has Lafortune variables
+    ``x1 = ux vx + uy vy`` and ``x2 = uz vz`` only in ``|x1| <= sin theta_v``, ``x2 <= cos theta_v`` whatever the
+    lights (16-27% of equation (11)'s weight lies outside). Fitting the blend's own MERL-grid data (every view
+    direction, far more than one view's slice) restricted to that part of the domain, and measuring equation (11)
+    on the whole grid, gives 1.04-1.27x: the domain alone exceeds 1.2x for 4 of the 15 texel channels. The rest of
+    the gap to the capture's 1.10-1.61x is the slice itself: one view sees one curve of values at each ``(x1, x2)``
+    where the grid fit averages over every view (the BRDF is not a function of the two variables)."""
+    mats, cap, _ = capture_fit
+    grid = pj.data.load_merl_nbrdf(list(MATERIALS), subsample=20000)
+    a = np.asarray(cap.blend)
+    truth = np.stack([sum(a[i, j, m] * grid.values[m] for m in range(len(mats))) for i, j in TEXELS])  # (5, 3, n)
+    x = np.asarray(pj.get_variables(VARIABLES)(grid.u, grid.v))
+    cos_v = np.array([float(svbrdf.directions(cap.positions[i, j], cap.lights, cap.camera)[1][2]) for i, j in TEXELS])
+    seen = (x[None, :, 1] <= cos_v[:, None]) & (np.abs(x[None, :, 0]) <= np.sqrt(1 - cos_v[:, None] ** 2))
+    ok = (np.asarray(grid.u)[:, 2] >= np.cos(np.radians(80))) & (np.asarray(grid.v)[:, 2] >= np.cos(np.radians(80)))
+    wc2 = np.asarray(grid.weights) * np.asarray(grid.u)[:, 2] ** 2 * ok
+    outside = 1 - (seen * wc2).sum(-1) / wc2.sum()
+    assert np.all((outside > 0.15) & (outside < 0.28)), outside  # 0.16 - 0.27 of equation (11)'s weight unseen
+    own = pj.fit_polynomial(grid.u, grid.v, truth, VARIABLES, DEGREE, weights=grid.weights)
+    part = pj.fit_polynomial(grid.u, grid.v, truth, VARIABLES, DEGREE, weights=grid.weights,
+                             mask=np.broadcast_to(seen[:, None], truth.shape))
+    ratio = np.asarray(pj.l2_error(truth, part(grid.u, grid.v), grid.u, grid.v, weights=grid.weights)) / own.l2
+    assert ratio.shape == (5, 3) and np.all(ratio >= 1.0), ratio
+    # measured 1.04 - 1.27: texel (5, 1) (all channels) and (0, 0) (G) above 1.2 from the domain alone
+    assert np.sum(ratio > 1.2) >= 3 and ratio.max() > 1.25 and np.median(ratio) < 1.2, ratio
 
 
 @pytest.mark.data
@@ -85,7 +117,10 @@ def test_svbrdf_cli(tmp_path, capsys):
     assert out["psnr_new_light"] >= 35.0
     meta = json.loads((tmp_path / "tex" / "manifest.json").read_text())
     assert meta["fields"]["coefficients"]["shape"] == [8, 8, 3, 2 * DEGREE + 1]
-    assert svbrdf.read_texture_shards(tmp_path / "tex").batch_shape == (8, 8, 3)
+    assert meta["formats"] == ["npz", "exr"] and (tmp_path / "tex" / "rows-0-8.exr").is_file()
+    npz, exr = (svbrdf.read_texture_shards(tmp_path / "tex", format=f) for f in ("npz", "exr"))
+    assert npz.batch_shape == exr.batch_shape == (8, 8, 3)
+    np.testing.assert_allclose(exr.coefficients, npz.coefficients, rtol=2.0**-48, atol=0)
 
 
 def test_svbrdf_cli_bad_light(tmp_path, capsys):
@@ -93,6 +128,8 @@ def test_svbrdf_cli_bad_light(tmp_path, capsys):
 
     assert main(["svbrdf", "--new-light", "1,2", "--out", str(tmp_path)]) == 2
     assert "--new-light: expected 3 comma-separated numbers" in capsys.readouterr().err
+    assert main(["svbrdf", "--format", "npz,tiff", "--out", str(tmp_path)]) == 2
+    assert "--format: expected npz, exr or npz,exr, found 'npz,tiff'" in capsys.readouterr().err
 
 
 def test_capture_observations_are_the_brdf():
@@ -105,3 +142,97 @@ def test_capture_observations_are_the_brdf():
     np.testing.assert_allclose(b, jnp.moveaxis(f(u, v), -1, -2), rtol=1e-12)
     d2 = np.sum((np.asarray(cap.lights)[None, None] - np.asarray(cap.positions)[:, :, None]) ** 2, -1)
     np.testing.assert_allclose(w, (np.mean([10.0, 5.0, 2.0]) / d2) ** 2, rtol=1e-12)
+
+
+def _small_texture(h=4, w=6, degree=2):
+    """A fitted 4 x 6 texture of an analytic material (no data needed): a capture and its per-texel fits."""
+    f = lambda u, v: jnp.stack([0.3 + u[..., 2] * v[..., 2], 0.1 + (u[..., 0] * v[..., 0]) ** 2,  # noqa: E731
+                                0.2 + 0.5 * u[..., 1] ** 2 * v[..., 2]], -1)
+    cap = svbrdf.simulate_capture([f], h, w, n_lights=24)
+    return cap, svbrdf.fit_capture(cap, "lafortune", degree)
+
+
+def test_texture_shards_exr_round_trip(tmp_path):
+    """EXR shards (float64 as float32 hi + lo channels) read back within 2^-48 relative of the fit; integer fields
+    exactly; the npz shards written beside them exactly; the hi channels are the coefficient textures in float32."""
+    import OpenEXR
+
+    cap, model = _small_texture()
+    model = eqx_tree_set(model, "l2", model.l2.at[1, 2, 0].set(jnp.inf))  # an empty lane's L2 is inf
+    manifest = svbrdf.write_texture_shards(tmp_path, model, formats=("npz", "exr"))
+    meta = json.loads(manifest.read_text())
+    assert meta["formats"] == ["npz", "exr"] and meta["exr_precision"] == "hi-lo"
+    assert meta["shards"] == [dict(rows=[0, 4], file="rows-0-4.npz", files=dict(npz="rows-0-4.npz",
+                                                                                exr="rows-0-4.exr"), process=0)]
+    coef = meta["fields"]["coefficients"]["exr"]
+    assert coef["encoding"] == "float64-hi-lo-float32" and coef["channels"][:4] == [
+        "coefficients.0.R", "coefficients.1.R", "coefficients.2.R", "coefficients.3.R"]
+    assert coef["lo_channels"][0] == "coefficients.0.lo.R"
+    assert meta["fields"]["status"]["exr"] == dict(encoding="int32-bits-uint32", channels=["status.R", "status.G",
+                                                                                         "status.B"], lo_channels=[])
+    with OpenEXR.File(str(tmp_path / "rows-0-4.exr"), separate_channels=True) as f:
+        ch = {k: np.asarray(c.pixels) for k, c in f.channels().items()}
+    assert ch["coefficients.3.G"].dtype == np.float32 and ch["coefficients.3.G"].shape == (4, 6)
+    np.testing.assert_array_equal(ch["coefficients.3.G"], np.asarray(model.coefficients[:, :, 1, 3], np.float32))
+
+    back = svbrdf.read_texture_shards(tmp_path, format="exr")
+    exact = svbrdf.read_texture_shards(tmp_path)  # npz, the first format written
+    for name in ("coefficients", "mean", "rotation", "centre", "halfwidth", "l2", "condition"):
+        want, got = np.asarray(getattr(model, name)), np.asarray(getattr(back, name))
+        assert got.dtype == np.float64 and got.shape == want.shape, name
+        fin = np.isfinite(want)
+        assert np.all(np.abs(got[fin] - want[fin]) <= 2.0**-48 * np.abs(want[fin])), name
+        np.testing.assert_array_equal(got[~fin], want[~fin])
+        np.testing.assert_array_equal(getattr(exact, name), want)
+    assert not np.array_equal(back.coefficients, model.coefficients)  # two float32s are not a float64
+    for name in ("degree", "rank", "n_used", "status"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(model, name))
+        assert getattr(back, name).dtype == getattr(model, name).dtype
+    np.testing.assert_allclose(svbrdf.relight(back, cap, (0.7, 0.9, 2.2)), svbrdf.relight(model, cap, (0.7, 0.9, 2.2)),
+                               rtol=1e-13)
+    part = svbrdf.read_texture_shards(tmp_path, rows=(1, 3), format="exr")
+    np.testing.assert_array_equal(part.coefficients, back.coefficients[1:3])
+    grey = model[:, :, 1]  # batch (H, W): no colour axis, channels named by index
+    meta = json.loads(svbrdf.write_texture_shards(tmp_path / "grey", grey, formats="exr").read_text())
+    assert meta["fields"]["coefficients"]["exr"]["channels"][:2] == ["coefficients.0", "coefficients.1"]
+    assert meta["fields"]["l2"]["exr"] == dict(encoding="float64-hi-lo-float32", channels=["l2"],
+                                               lo_channels=["l2.lo"])
+    g = svbrdf.read_texture_shards(tmp_path / "grey")
+    assert g.batch_shape == (4, 6)
+    np.testing.assert_allclose(g.rotation, grey.rotation, rtol=2.0**-48, atol=0)
+
+
+def test_texture_shards_exr_float32_and_errors(tmp_path):
+    cap, model = _small_texture()
+    svbrdf.write_texture_shards(tmp_path / "f32", model, formats="exr", exr_precision="float32")
+    meta = json.loads((tmp_path / "f32" / svbrdf.MANIFEST).read_text())
+    assert meta["formats"] == ["exr"] and meta["shards"][0]["file"] == "rows-0-4.exr"
+    back = svbrdf.read_texture_shards(tmp_path / "f32")
+    np.testing.assert_array_equal(back.coefficients, np.asarray(model.coefficients, np.float32).astype(np.float64))
+    with pytest.raises(pj.InputError, match="formats: expected one or more of"):
+        svbrdf.write_texture_shards(tmp_path / "x", model, formats="png")
+    with pytest.raises(pj.InputError, match="exr_precision: expected one of"):
+        svbrdf.write_texture_shards(tmp_path / "x", model, formats="exr", exr_precision="float16")
+    flat = svbrdf.fit_capture(cap, "lafortune", 2)[0, 0]  # batch (3,): not a texture
+    with pytest.raises(pj.InputError, match=r"model: expected a texture of batch shape \(H, W, ...\)"):
+        svbrdf.write_texture_shards(tmp_path / "x", flat, formats="exr")
+    assert not (tmp_path / "x").exists()  # nothing written
+    huge = eqx_tree_set(model, "condition", model.condition.at[0, 0, 0].set(1e300))
+    with pytest.raises(pj.InputError, match="condition: expected values within float32's range"):
+        svbrdf.write_texture_shards(tmp_path / "y", huge, formats="exr")
+    with pytest.raises(pj.InputError, match=r"format: expected one of the formats written, \['exr'\]"):
+        svbrdf.read_texture_shards(tmp_path / "f32", format="npz")
+    bad = dict(meta, format="polyjax-texture-shards/9")
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / svbrdf.MANIFEST).write_text(json.dumps(bad))
+    with pytest.raises(pj.DataFormatError, match="expected format 'polyjax-texture-shards/2', found "):
+        svbrdf.read_texture_shards(tmp_path / "bad")
+    (tmp_path / "f32" / "rows-0-4.exr").write_bytes(b"not an exr")
+    with pytest.raises(pj.DataFormatError, match="an OpenEXR texture shard"):
+        svbrdf.read_texture_shards(tmp_path / "f32")
+
+
+def eqx_tree_set(model, name, value):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda m: getattr(m, name), model, value)

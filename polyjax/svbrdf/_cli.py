@@ -25,7 +25,8 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
         "svbrdf", parents=list(parents), help="simulate an SVBRDF capture, fit every texel, write texture shards",
         description="Simulate photographs of a flat sample whose texels blend neural MERL materials, under point "
         "lights and a fixed camera (direct evaluation of f(u, v) E cos(theta_u) per texel); fit a polynomial BRDF "
-        "to every texel in closed form; write the coefficient textures (one .npz per shard and manifest.json); "
+        "to every texel in closed form; write the coefficient textures (one .npz and/or one multi-channel OpenEXR "
+        "image per shard, and manifest.json); "
         "re-render under a new light and report the PSNR against the simulated photograph there.")
     p.add_argument("--size", type=int, default=64, help="texels per side (default 64)")
     p.add_argument("--lights", type=int, default=48, help="number of point lights of the capture (default 48)")
@@ -34,6 +35,8 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--degree", type=int, default=3, help="polynomial degree p of the per-texel fits (default 3)")
     p.add_argument("--new-light", default="0.7,0.9,2.2", help="x,y,z of the re-rendering light")
     p.add_argument("--out", required=True, help="output folder of the texture shards and manifest")
+    p.add_argument("--format", default="npz,exr",
+                   help="shard files: npz (exact), exr (float64 as float32 hi + lo channels) or both (default npz,exr)")
     p.add_argument("--coordinator", default="localhost:12355", help="host:port of process 0 (several processes)")
     p.add_argument("--num-processes", type=int, default=1,
                    help="processes of the jax.distributed run (default 1)")
@@ -44,9 +47,14 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
 
 
 def run_svbrdf(args) -> int:
+    from .._errors import InputError
     from . import _distributed
+    from ._shards import FORMATS
 
     light = _floats(args.new_light, 3, "--new-light")  # argument errors before any work
+    formats = tuple(f.strip() for f in args.format.split(","))
+    if not all(f in FORMATS for f in formats) or len(set(formats)) != len(formats):
+        raise InputError(f"--format: expected npz, exr or npz,exr, found {args.format!r}")
     _distributed.initialize(args.coordinator, args.num_processes, args.process_id)  # before any JAX computation
     import jax
     import jax.numpy as jnp
@@ -72,7 +80,7 @@ def run_svbrdf(args) -> int:
     model = fit_rows_distributed(load_rows, args.size, args.variables, args.degree)
     jax.block_until_ready(model.coefficients)
     t_fit = time.perf_counter() - t0
-    manifest = write_texture_shards(args.out, model)
+    manifest = write_texture_shards(args.out, model, formats=formats)
     cap = held["capture"]
     mine = local_part(model)
     image, ref = relight(mine, cap, light), photograph(materials, cap, light)

@@ -1,12 +1,14 @@
-"""Coefficient textures written shard by shard: one ``.npz`` per shard of the texture, and a JSON manifest.
+"""Coefficient textures written shard by shard: one ``.npz`` and/or one OpenEXR file per shard, and a JSON manifest.
 
 A fitted texture (a :class:`polyjax.PolynomialBRDF` whose leading batch axis is the texel rows) is written by
 every process for the shards it holds (:attr:`jax.Array.addressable_shards`), so nothing is gathered to one host.
-Shard files are named by their rows, ``rows-<start>-<stop>.npz``, and hold every array field of the model for
-those rows plus ``row_start``/``row_stop``. The manifest ``manifest.json`` (written by process 0, from the
-sharding alone, without reading any data) lists the texture's shape, the model's static description
-(variables, basis, interactions, max_degree), every field's global shape and dtype, and every shard: its rows,
-file name and the process that writes it.
+Shard files are named by their rows, ``rows-<start>-<stop>.npz`` (every array field of the model for those rows,
+exact, plus ``row_start``/``row_stop``) and ``rows-<start>-<stop>.exr`` (one multi-channel image per shard, one
+channel per coefficient and colour; float64 as a pair of float32 channels, see ``polyjax/svbrdf/_exr.py``). The
+manifest ``manifest.json`` (written by process 0, from the sharding alone, without reading any data) lists the
+texture's shape, the model's static description (variables, basis, interactions, max_degree, link, eps), every
+field's global shape and dtype (and its EXR encoding and channel names), the formats written, and every shard:
+its rows, files and the process that writes it.
 """
 
 from __future__ import annotations
@@ -18,11 +20,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._errors import DataFormatError, DataNotFoundError
+from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._model import PolynomialBRDF
+from ._exr import channel_layout, read_exr_shard, write_exr_shard
 
 MANIFEST = "manifest.json"
-FORMAT = "polyjax-texture-shards/1"
+FORMAT = "polyjax-texture-shards/2"
+_READABLE = ("polyjax-texture-shards/1", FORMAT)  # /1: npz only, no link/eps (identity link)
+#: the shard file formats
+FORMATS = ("npz", "exr")
 _FIELDS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used",
            "status")
 
@@ -32,84 +38,149 @@ def _rows(index) -> tuple[int, int]:
     return (s.start or 0), s.stop
 
 
-def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *, row0: int = 0) -> Path:
-    """Write the shards of ``model`` this process holds, and (process 0) the manifest; returns the manifest path.
+def _check_formats(formats, model: PolynomialBRDF, exr_precision: str) -> tuple[str, ...]:
+    formats = (formats,) if isinstance(formats, str) else tuple(formats)
+    if not formats or any(f not in FORMATS for f in formats) or len(set(formats)) != len(formats):
+        raise InputError(f"formats: expected one or more of {FORMATS}, found {formats!r}")
+    if "exr" in formats:
+        if len(model.batch_shape) < 2:
+            raise InputError(f"model: expected a texture of batch shape (H, W, ...) for EXR shards, found batch "
+                             f"shape {model.batch_shape}")
+        channel_layout("coefficients", (), np.float64, 0, False, exr_precision)  # checks exr_precision
+    return formats
 
-    Args:
-        directory: output folder (created).
-        model: a texture of models, batch ``(H, ...)``, its arrays sharded (or not) over the rows ``H``.
-        row0: the global row of the model's first row (for a model holding only part of the texture).
-    """
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    ref = model.coefficients
+
+def _shard_map(ref) -> dict[tuple[int, int], int]:
+    """Rows ``(start, stop)`` of every shard of ``ref`` -> the process holding it."""
     height = ref.shape[0]
     sharding = getattr(ref, "sharding", None)
-    shards = {}  # rows -> process index
+    shards = {}
     if sharding is not None:
         for dev, idx in sharding.devices_indices_map(ref.shape).items():
             shards.setdefault(_rows(idx), dev.process_index)
     else:
         shards[(0, height)] = jax.process_index()
-    shards = {(a, height if b is None else b): p for (a, b), p in shards.items()}
-    mine = sorted(r for r, p in shards.items() if p == jax.process_index())
-    for start, stop in mine:
-        parts = {}
-        for name in _FIELDS:
-            a = getattr(model, name)
-            local = [s for s in getattr(a, "addressable_shards", []) if _rows(s.index)[0] == start]
-            arr = np.asarray(local[0].data) if local else np.asarray(a[start:stop])
-            if arr.shape[0] != stop - start:  # replicated over rows: this shard's rows of it
-                arr = arr[start:stop]
-            parts[name] = arr
-        np.savez(out / f"rows-{row0 + start}-{row0 + stop}.npz", row_start=row0 + start, row_stop=row0 + stop,
-                 **parts)
+    return {(a, height if b is None else b): p for (a, b), p in shards.items()}
+
+
+def _local_rows(model: PolynomialBRDF, start: int, stop: int) -> dict[str, np.ndarray]:
+    """Every field of ``model`` for rows ``start .. stop``, from this process's shard (never a gather)."""
+    parts = {}
+    for name in _FIELDS:
+        a = getattr(model, name)
+        local = [s for s in getattr(a, "addressable_shards", []) if _rows(s.index)[0] == start]
+        arr = np.asarray(local[0].data) if local else np.asarray(a[start:stop])
+        if arr.shape[0] != stop - start:  # replicated over rows: this shard's rows of it
+            arr = arr[start:stop]
+        parts[name] = arr
+    return parts
+
+
+def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *, row0: int = 0,
+                         formats: str | tuple[str, ...] = "npz", exr_precision: str = "hi-lo") -> Path:
+    """Write the shards of ``model`` this process holds, and (process 0) the manifest; returns the manifest path.
+
+    Args:
+        directory: output folder (created).
+        model: a texture of models, batch ``(H, ...)`` (``(H, W, ...)`` for EXR), its arrays sharded (or not) over
+            the rows ``H``.
+        row0: the global row of the model's first row (for a model holding only part of the texture).
+        formats: ``"npz"`` (exact), ``"exr"`` (one multi-channel OpenEXR image per shard) or both,
+            e.g. ``("npz", "exr")``.
+        exr_precision: ``"hi-lo"`` (float64 fields as two float32 channels, ``hi + lo`` within ``2^-48``
+            relative) or ``"float32"`` (one channel, rounded to float32); see ``polyjax/svbrdf/_exr.py``.
+
+    Raises :class:`polyjax.InputError` (before anything is written) for an unknown format or precision, or a model
+    that is not a 2-D texture when EXR is asked for.
+    """
+    formats = _check_formats(formats, model, exr_precision)
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    height = model.coefficients.shape[0]
+    shards = _shard_map(model.coefficients)
+    n_lane = len(model.batch_shape) - 2
+    rgb = tuple(model.batch_shape[2:]) == (3,)
+    fields = {n: dict(shape=list(getattr(model, n).shape), dtype=str(getattr(model, n).dtype)) for n in _FIELDS}
+    if "exr" in formats:
+        for n, meta in fields.items():
+            meta["exr"] = channel_layout(n, tuple(meta["shape"][2:]), meta["dtype"], n_lane, rgb, exr_precision)
+    name = lambda a, b, ext: f"rows-{row0 + a}-{row0 + b}.{ext}"  # noqa: E731
+    for start, stop in sorted(r for r, p in shards.items() if p == jax.process_index()):
+        parts = _local_rows(model, start, stop)
+        if "npz" in formats:
+            np.savez(out / name(start, stop, "npz"), row_start=row0 + start, row_stop=row0 + stop, **parts)
+        if "exr" in formats:
+            write_exr_shard(out / name(start, stop, "exr"), parts, {n: fields[n]["exr"] for n in _FIELDS},
+                            (row0 + start, row0 + stop))
     manifest = out / MANIFEST
     if jax.process_index() == 0:
         meta = dict(
             format=FORMAT, height=int(row0 + height), batch_shape=list(model.batch_shape), variables=model.variables,
-            basis=model.basis, interactions=model.interactions, max_degree=model.max_degree,
-            fields={n: dict(shape=list(getattr(model, n).shape), dtype=str(getattr(model, n).dtype)) for n in _FIELDS},
-            shards=[dict(rows=[row0 + a, row0 + b], file=f"rows-{row0 + a}-{row0 + b}.npz", process=p)
-                    for (a, b), p in sorted(shards.items())],
+            basis=model.basis, interactions=model.interactions, max_degree=model.max_degree, link=model.link,
+            eps=float(model.eps), formats=list(formats), exr_precision=exr_precision if "exr" in formats else None,
+            fields=fields,
+            shards=[dict(rows=[row0 + a, row0 + b], file=name(a, b, formats[0]),
+                         files={f: name(a, b, f) for f in formats}, process=p) for (a, b), p in sorted(shards.items())],
             processes=jax.process_count(),
         )
         manifest.write_text(json.dumps(meta, indent=1))
     return manifest
 
 
-def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | None = None) -> PolynomialBRDF:
+def _read_manifest(d: Path, fmt: str | None) -> tuple[dict, str]:
+    path = d / MANIFEST
+    if not path.is_file():
+        raise DataNotFoundError(f"expected a texture manifest {MANIFEST} in {str(d)!r}; none there")
+    meta = json.loads(path.read_text())
+    if meta.get("format") not in _READABLE:
+        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format")))
+    have = meta.get("formats", ["npz"])
+    fmt = have[0] if fmt is None else fmt
+    if fmt not in have:
+        raise InputError(f"format: expected one of the formats written, {have}, found {fmt!r}")
+    return meta, fmt
+
+
+def _read_npz_shard(f: Path, rows: int) -> dict[str, np.ndarray]:
+    with np.load(f) as z:
+        for n in _FIELDS:
+            if n not in z or z[n].shape[0] != rows:
+                raise DataFormatError(f, f"field {n!r} with {rows} rows", f"{z[n].shape if n in z else 'none'}")
+        return {n: z[n] for n in _FIELDS}
+
+
+def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | None = None,
+                        format: str | None = None) -> PolynomialBRDF:
     """Read a texture written by :func:`write_texture_shards` (all of it, or the shards covering ``rows``).
+
+    Args:
+        directory: the folder of the manifest and shards.
+        rows: ``(start, stop)`` texture rows to read; all by default.
+        format: ``"npz"`` or ``"exr"``, one of the formats written; the first written by default.
 
     Raises :class:`polyjax.DataNotFoundError` when the manifest or a shard is missing and
     :class:`polyjax.DataFormatError` when a file does not match the manifest.
     """
     d = Path(directory)
-    path = d / MANIFEST
-    if not path.is_file():
-        raise DataNotFoundError(f"expected a texture manifest {MANIFEST} in {str(d)!r}; none there")
-    meta = json.loads(path.read_text())
-    if meta.get("format") != FORMAT:
-        raise DataFormatError(f"{path}: expected format {FORMAT!r}, found {meta.get('format')!r}")
+    meta, fmt = _read_manifest(d, format)
     lo, hi = (0, meta["height"]) if rows is None else rows
     pieces = {n: [] for n in _FIELDS}
     for shard in meta["shards"]:
         a, b = shard["rows"]
         if b <= lo or a >= hi:
             continue
-        f = d / shard["file"]
+        f = d / shard.get("files", {"npz": shard["file"]})[fmt]
         if not f.is_file():
-            raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(path)!r}; it is missing")
-        with np.load(f) as z:
-            for n in _FIELDS:
-                if n not in z or z[n].shape[0] != b - a:
-                    raise DataFormatError(f"{f}: expected field {n!r} with {b - a} rows, found "
-                                          f"{z[n].shape if n in z else 'none'}")
-                pieces[n].append(z[n][max(lo, a) - a: min(hi, b) - a])
+            raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(d / MANIFEST)!r}; it is "
+                                    "missing")
+        got = _read_npz_shard(f, b - a) if fmt == "npz" else read_exr_shard(f, meta["fields"], b - a)
+        for n in _FIELDS:
+            pieces[n].append(got[n][max(lo, a) - a: min(hi, b) - a])
     arrays = {n: np.concatenate(p, axis=0) for n, p in pieces.items()}
     return PolynomialBRDF(**{n: jax.numpy.asarray(a) for n, a in arrays.items()}, variables=meta["variables"],
                           basis=meta["basis"], interactions=bool(meta["interactions"]),
-                          max_degree=int(meta["max_degree"]))
+                          max_degree=int(meta["max_degree"]), link=meta.get("link", "identity"),
+                          eps=float(meta.get("eps", 0.0)))
 
 
 def local_part(model: PolynomialBRDF) -> PolynomialBRDF:
