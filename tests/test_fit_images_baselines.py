@@ -103,14 +103,15 @@ def test_several_light_samples_recovered(which):
     assert float(jnp.max(jnp.abs(again - images))) < 1e-6 * float(jnp.max(images))
 
 
-def test_several_light_samples_derivatives_match_finite_differences():
-    """d params / d images and d params / d (a light's intensity) of the two-light fit, by the implicit function
+@pytest.mark.parametrize("which", ["two lights", "environment"])
+def test_several_light_samples_derivatives_match_finite_differences(which):
+    """d params / d images and d params / d (a point light's intensity) of the fit, by the implicit function
     theorem, against central differences of refits (tolerance 1e-12): relative error <= 1e-5."""
-    tangent = _rendered(_several(pr.ParametricBRDF(bl.cook_torrance, jnp.array([0.2, 0.1, 0.3, 0.05])), "two lights"))
-    base = _rendered(_several(pr.ParametricBRDF(_ct_rgb, TRUE_RGB), "two lights"))
+    tangent = _rendered(_several(pr.ParametricBRDF(bl.cook_torrance, jnp.array([0.2, 0.1, 0.3, 0.05])), which))
+    base = _rendered(_several(pr.ParametricBRDF(_ct_rgb, TRUE_RGB), which))
 
     def params(images, intensity):
-        scenes = _several(pr.Lambertian(), "two lights", intensity=intensity)
+        scenes = _several(pr.Lambertian(), which, intensity=intensity)
         return bl.fit_to_images("cook-torrance", scenes, images, n_starts=4, spp=8, key=jax.random.PRNGKey(0),
                                 **TIGHT).params
 
