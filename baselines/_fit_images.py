@@ -1,29 +1,45 @@
 r"""Fitting a nonlinear model straight from images: multi-start Levenberg-Marquardt on image residuals.
 
-Under one point or directional light per image, the renderer's radiance of a pixel that sees the target object is
-``L_c = c_c f(u, v)`` per colour channel ``c`` with ``c_c = E_c cos(theta_u) V`` known from the scene
-(:func:`polyjax.render.light_samples`, the render as a linear function of the BRDF). The image residual of a kept
-pixel is therefore
+The pixels and their light samples come from :func:`polyjax.image_rows` (the rows the closed-form
+:func:`polyjax.fit_polynomial_to_images` solves for): the radiance of a kept pixel ``i`` in channel ``k`` is
+``L_ik = sum_j c_ijk f(u_ij, v_i)``, and the fit minimises ``sum_i w_i (I_ik - L_ik)^2`` per channel.
 
-.. math:: \sqrt{w_{px}}\,(I_c - c_c f) = \sqrt{w_{px}}\, E_c V \cos\theta_u\,\Big(\frac{I_c}{c_c} - f\Big),
+- **One light sample per pixel** (one point or directional light per scene): ``L_ik = c_ik f(u_i, v_i)`` with
+  ``c_ik = E_k cos(theta_u) V``, so the residual of a kept pixel is
 
-the residual of equation (11) with values ``I_c / c_c`` and weights ``w_px (E_c V)^2``: :func:`baselines.fit` on
-those lanes (R, G, B) minimises exactly the squared radiance residuals, with all its starts, stages, result codes and
-derivatives (w.r.t. the images, pixel weights and lights, by the implicit function theorem).
+  .. math:: \sqrt{w_i}\,(I_{ik} - c_{ik} f) = \sqrt{w_i}\, E_k V \cos\theta_u\,\Big(\frac{I_{ik}}{c_{ik}} - f\Big),
+
+  the residual of equation (11) with values ``I / c`` and weights ``w (E V)^2``: :func:`baselines.fit` on those
+  lanes minimises exactly the squared radiance residuals, with all its starts, stages, range-limit rounds, result
+  codes and derivatives.
+- **Several light samples per pixel** (several lights, an environment map): the residual is a sum over samples, and
+  :mod:`baselines._light_sums` runs the same starts and Levenberg-Marquardt solve on it.
+
+Both differentiate (``jit``, ``grad``, ``jvp``) w.r.t. the images, pixel weights, lights and environment texels by
+the implicit function theorem at the kept optimum; the pixel selection and the choice of start are piecewise
+constant.
 """
 
 from __future__ import annotations
 
 from typing import Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from polyjax import InputError, is_concrete
+import polyjax as pj
+from polyjax import InputError, Result, raise_on_status
 
 from ._fit import fit
+from ._light_sums import light_sum_kernel, package
 from ._registry import get_model
+from ._result import BaselineFit
+from ._starts import check_n_starts
+
+#: options of :func:`baselines.fit` that the several-light-samples kernel takes too
+_LIGHT_SUM_OPTIONS = ("max_steps", "rtol", "atol", "stage_steps", "throw")
 
 
 def fit_to_images(
@@ -37,91 +53,91 @@ def fit_to_images(
     pixel_weights: Sequence[ArrayLike] | ArrayLike | None = None,
     saturation: float | None = None,
     cutoff_deg: float | None = 80.0,
+    spp: int = 64,
+    seed: int = 0,
     **fit_options,
-):
-    r"""Fit the nonlinear model ``name`` to images (linear RGB) of one object under known point or directional
-    lights: one R, G, B lane each, by :func:`baselines.fit` on the image residuals (see the module notes).
+) -> BaselineFit:
+    r"""Fit the nonlinear model ``name`` to images (linear RGB) of one object under known lighting: one R, G, B
+    lane each, by multi-start Levenberg-Marquardt on the image residuals (see the module notes).
 
     Minimises, per channel, ``sum_px w_px (I_px - L_px(params))^2`` over the kept pixels of every image, where
     ``L_px`` is the renderer's radiance of the model (:func:`polyjax.render.render` of a
-    :class:`polyjax.render.ParametricBRDF`). Pixels are kept as in :func:`polyjax.fit_polynomial_to_images`: on
-    the target, finite, below ``saturation``, lit and not shadowed, ``theta_u`` and ``theta_v`` within
-    ``cutoff_deg``.
+    :class:`polyjax.render.ParametricBRDF`; under an environment map the same ``spp``-sample estimate). Pixels are
+    kept and weighted as in :func:`polyjax.fit_polynomial_to_images` (:func:`polyjax.image_rows`).
 
     Args:
         name: a nonlinear model of :data:`baselines.MODELS`.
-        scenes: a :class:`polyjax.render.Scene` or a sequence, one per image, each with exactly one point or
-            directional light and direct lighting only; the target's BRDF is a placeholder.
+        scenes: a :class:`polyjax.render.Scene` or a sequence, one per image, with point and directional lights and
+            environment maps, direct lighting only; the target's BRDF is a placeholder.
         images: ``(H, W, 3)`` per scene (a sequence, or ``(n, H, W, 3)``).
         n_starts, key: as in :func:`baselines.fit`.
         target: index of the fitted object in each scene's ``objects``.
         pixel_weights: ``(H, W)`` non-negative weights per image (or a scalar per image), 1 by default.
         saturation: pixels with a channel at or above this value are excluded; None keeps every finite pixel.
         cutoff_deg: grazing cutoff in degrees; None keeps every lit pixel above the horizon.
-        fit_options: passed to :func:`baselines.fit` (``max_steps``, ``rtol``, ``backend``, ...).
+        spp, seed: environment samples per pixel and their seed (scenes with an environment map). The samples are
+            those of a render with the same ``spp`` and ``seed`` when the map is built outside ``jit`` (a map built
+            inside draws from other sampling tables, :mod:`polyjax.render`): then the fit sees the render's own
+            estimate.
+        fit_options: passed to :func:`baselines.fit` under one light sample per pixel (``max_steps``, ``rtol``,
+            ``backend``, ...); with several, only ``max_steps``, ``rtol``, ``atol``, ``stage_steps`` and ``throw``.
 
     Returns:
         :class:`baselines.BaselineFit` with batch shape ``(3,)`` (R, G, B). Its ``l2`` is the root-mean-square
-        radiance residual over the kept pixels divided by the root-mean-square light factor ``E V`` of those
-        pixels (equation (11) with the weights above).
+        radiance residual over the kept pixels divided by the root-mean-square light factor of those pixels
+        (``E V`` under one light, ``sum_j c_j / cos(theta_u,j)`` in general): equation (11) with the weights above.
 
     Raises:
-        InputError: a scene with several lights or an environment map (its radiance is a sum over light samples:
-            not implemented), scenes and images that disagree, a linear model, no kept pixel (concrete inputs).
+        InputError: scenes and images that disagree, a linear model, an option the several-sample fit does not
+            take, no kept pixel (concrete inputs), and the errors of :func:`polyjax.image_rows`.
     """
-    from polyjax.render import Scene, light_samples
-
-    if get_model(name).linear:
+    model = get_model(name)
+    if model.linear:
         raise InputError(f"name: {name} is linear; fit it with polyjax.fit_polynomial_to_images-style solves")
-    scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
-    if isinstance(images, (list, tuple)):
-        images = list(images)
-    else:
-        arr = jnp.asarray(images)
-        images = [arr] if arr.ndim == 3 else list(arr)
-    if not scenes or len(images) != len(scenes):
-        raise InputError(f"images: expected one image per scene ({len(scenes)}), found {len(images)}")
-    if pixel_weights is None:
-        pixel_weights = [None] * len(scenes)
-    elif not isinstance(pixel_weights, (list, tuple)):
-        pw = jnp.asarray(pixel_weights)
-        pixel_weights = list(pw) if pw.ndim in (1, 3) else [pw] * len(scenes)
-    if len(pixel_weights) != len(scenes):
-        raise InputError(f"pixel_weights: expected one entry per scene ({len(scenes)}), found {len(pixel_weights)}")
-    dtype = jnp.result_type(float)
-    cos_cut = None if cutoff_deg is None else float(np.cos(np.deg2rad(cutoff_deg)))
-    us, vs, cs, ys, ws, keeps = [], [], [], [], [], []
-    for i, (scene, img, pw) in enumerate(zip(scenes, images, pixel_weights)):
-        if not isinstance(scene, Scene):
-            raise InputError(f"scenes[{i}]: expected a polyjax.render.Scene, found {type(scene).__name__}")
-        h, w = scene.camera.height, scene.camera.width
-        img = jnp.asarray(img)
-        if img.shape != (h, w, 3):
-            raise InputError(f"images[{i}]: expected linear RGB of shape ({h}, {w}, 3), found {img.shape}")
-        ls = light_samples(scene, target, dtype=dtype)
-        if ls.u.shape[1] != 1 or not bool(np.all(np.asarray(ls.is_point))):
-            raise InputError(f"scenes[{i}]: expected exactly one point or directional light (no environment map); "
-                             f"found {ls.u.shape[1]} light samples per pixel")
-        img = img.astype(dtype).reshape(-1, 3)
-        pw = jnp.ones((h * w,), dtype) if pw is None else jnp.broadcast_to(jnp.asarray(pw, dtype), (h, w)).reshape(-1)
-        u, c = ls.u[:, 0], ls.weight[:, 0]
-        ok = ls.on_target & ~ls.shadowed & jnp.all(jnp.isfinite(img), axis=-1) & (pw > 0)
-        ok = ok & jnp.any(c > 0, axis=-1) & (ls.v[:, 2] > 0) & (u[:, 2] > 0)
-        if saturation is not None:
-            ok = ok & jnp.all(img < saturation, axis=-1)
-        if cos_cut is not None:
-            ok = ok & (ls.v[:, 2] >= cos_cut) & (u[:, 2] >= cos_cut)
-        us.append(u), vs.append(ls.v), cs.append(c), ys.append(img), ws.append(pw), keeps.append(ok)
-    u, v, c, y, wpx, keep = (jnp.concatenate(a) for a in (us, vs, cs, ys, ws, keeps))
-    if is_concrete(keep):
-        idx = np.flatnonzero(np.asarray(keep))
-        if idx.size == 0:
-            raise InputError("images: no pixel is kept (on the target, lit, unsaturated, within the cutoff)")
-        u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
-    lit = keep[:, None] & (c > 0)
+    check_n_starts(n_starts)
+    rows = pj.image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
+                         cutoff_deg=cutoff_deg, spp=spp, seed=seed)
+    if pj.is_concrete(rows.keep) and not bool(np.any(np.asarray(rows.keep))):
+        raise InputError("images: no pixel is kept (on the target, lit, unsaturated, within the cutoff)")
+    if rows.u.shape[1] == 1:
+        return _fit_one_sample(model.name, rows, n_starts, key, fit_options)
+    return _fit_light_sums(model.name, rows, n_starts, key, fit_options)
+
+
+def _fit_one_sample(name, rows, n_starts, key, fit_options) -> BaselineFit:
+    """One light sample per pixel: :func:`baselines.fit` on values ``I / c`` and weights ``w (c / cos)^2``."""
+    u, c = rows.u[:, 0], rows.weight[:, 0]
+    lit = rows.keep[:, None] & (c > 0)
     c_safe = jnp.where(lit, c, 1.0)
-    cos_u = jnp.where(keep, u[:, 2], 1.0)[:, None]
-    values = jnp.where(lit, y / c_safe, 0.0).T  # (3, n): I / c
-    weights = jnp.where(lit, wpx[:, None] * (c_safe / cos_u) ** 2, 0.0).T  # (3, n): w_px (E V)^2
-    return fit(name, u, v, values, weights=weights, mask=lit.T, cutoff_deg=None, n_starts=n_starts, key=key,
+    cos_u = jnp.where(rows.keep, u[:, 2], 1.0)[:, None]
+    values = jnp.where(lit, rows.values / c_safe, 0.0).T  # (3, n): I / c
+    weights = jnp.where(lit, rows.pixel_weights[:, None] * (c_safe / cos_u) ** 2, 0.0).T  # (3, n): w (E V)^2
+    return fit(name, u, rows.v, values, weights=weights, mask=lit.T, cutoff_deg=None, n_starts=n_starts, key=key,
                **fit_options)
+
+
+def _fit_light_sums(name, rows, n_starts, key, fit_options) -> BaselineFit:
+    """Several light samples per pixel: :mod:`baselines._light_sums` (its kernel on constants, then the kept
+    optimum with its implicit derivative)."""
+    extra = sorted(set(fit_options) - set(_LIGHT_SUM_OPTIONS))
+    if extra:
+        raise InputError(f"fit_options: {extra} not supported with several light samples per pixel (several "
+                         f"lights or an environment map); expected only {list(_LIGHT_SUM_OPTIONS)}")
+    opts = dict(max_steps=100, rtol=1e-6, atol=1e-8, stage_steps=6, throw=False) | fit_options
+    for k in ("max_steps", "stage_steps"):
+        if not isinstance(opts[k], (int, np.integer)) or opts[k] < 1:
+            raise InputError(f"{k}: expected a positive integer, found {opts[k]!r}")
+    c = jnp.moveaxis(rows.weight, -1, 0)  # (3, N, J)
+    y = rows.values.T  # (3, N)
+    sg = jax.lax.stop_gradient  # the solver sees constants; the optimum differentiates implicitly
+    out = light_sum_kernel(
+        name, sg(rows.u), sg(rows.v), sg(c), sg(y), sg(rows.pixel_weights), jax.random.PRNGKey(0) if key is None
+        else key, n_starts=int(n_starts), max_steps=int(opts["max_steps"]), stage_steps=int(opts["stage_steps"]),
+        rtol=float(opts["rtol"]), atol=float(opts["atol"]),
+    )
+    out["raw"], out["params"], out["l2"] = package(name, out["raw"], rows.u, rows.v, c, y, rows.pixel_weights)
+    status = out["status"]
+    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status)
+    out.update(status=status.astype(jnp.int32), success=(status == Result.OK) & jnp.isfinite(out["l2"]))
+    fitted = BaselineFit(**out, name=name)
+    return raise_on_status("fit_to_images", fitted.status, fitted) if opts["throw"] else fitted

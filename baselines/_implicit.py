@@ -47,16 +47,23 @@ def _damped_solve(h, b):
 def implicit_optimum(model, raw, u, v, y, wl, wc2):
     """``raw (B, P)`` unchanged, differentiable w.r.t. ``u``, ``v``, ``y``, ``wl``, ``wc2`` as the optimum of each
     lane's least-squares objective (see the module docs). ``raw`` itself carries no derivative."""
+    wl = jnp.broadcast_to(wl, y.shape)
+    wc2 = jnp.broadcast_to(wc2, y.shape)
+    return implicit_least_squares(lambda t, yb, wlb, wc2b: residuals_of(model, u, v, yb, wlb, wc2b)(t), raw,
+                                  y, wl, wc2)
+
+
+def implicit_least_squares(residual, raw, *lanes):
+    """``raw (B, P)`` unchanged, differentiable as the minimiser of ``1/2 |residual(raw_b, *lanes_b)|^2`` per lane
+    ``b`` (the rule of the module docs); ``lanes`` are arrays ``(B, ...)``, and ``residual`` may close over data
+    shared by every lane (differentiated too). ``raw`` itself carries no derivative."""
     raw = jax.lax.stop_gradient(raw)
 
-    def one(raw_b, yb, wlb, wc2b):
-        fn = residuals_of(model, u, v, yb, wlb, wc2b)
-        grad = lambda t: jax.grad(lambda s: 0.5 * jnp.sum(fn(s) ** 2))(t)  # noqa: E731
+    def one(raw_b, *lane):
+        grad = lambda t: jax.grad(lambda s: 0.5 * jnp.sum(residual(s, *lane) ** 2))(t)  # noqa: E731
         return jax.lax.custom_root(
             grad, raw_b, solve=lambda g, x0: raw_b,
             tangent_solve=lambda g, b: _damped_solve(jax.jacfwd(g)(jnp.zeros_like(b)), b),
         )
 
-    wl = jnp.broadcast_to(wl, y.shape)
-    wc2 = jnp.broadcast_to(wc2, y.shape)
-    return jax.vmap(one)(raw, y, wl, wc2)
+    return jax.vmap(one)(raw, *lanes)

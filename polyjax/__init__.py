@@ -25,6 +25,7 @@ from ._geometry import (
     safe_normalize,
     spherical_to_cartesian,
 )
+from ._image_rows import ImageRows, image_rows
 from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
 from ._io import load_model, save_model
 from ._kinds import ModelKind, model_kinds, register_model_kind
@@ -58,13 +59,14 @@ def __dir__():
 
 __all__ = [
     "ApproximationError", "CACHE_ENV", "DATA_ENV", "DataFormatError", "DataNotFoundError", "FitError", "FitStatus",
-    "InputError", "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF",
+    "ImageRows", "InputError", "LstsqSolution", "Measurements", "ModelKind", "PCA", "PolyjaxError", "PolynomialBRDF",
     "PreparedInputs", "RESULTS", "Result", "UnknownNameError", "VariableSet", "approximation_error",
     "cartesian_to_spherical", "check_parameter_count", "check_samples", "cos_theta", "cutoff_mask", "data",
     "data_root", "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form",
     "explanatory_variables", "export", "exponents", "fit_log_polynomial", "fit_pca", "fit_polynomial",
     "fit_polynomial_to_images", "fit_weights", "fitted_design", "get_variables", "half_vector", "has_data_root",
-    "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters", "n_terms",
+    "image_rows", "is_concrete", "l2_error", "load_model", "make_measurements", "model_kinds", "n_parameters",
+    "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
     "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
 ]

@@ -26,6 +26,7 @@ from jaxtyping import ArrayLike
 from ._basis import BASES
 from ._design import fitted_design as _design_for
 from ._errors import InputError
+from ._image_rows import image_rows
 from ._lstsq import METHODS, weighted_lstsq
 from ._model import FitStatus, PolynomialBRDF
 from ._variables import get_variables
@@ -63,7 +64,8 @@ def fit_polynomial_to_images(
     shadow of any point or directional light that faces them (a partly shadowed pixel is excluded,
     as are its shadow edges), with ``theta_v`` and every lit point light's ``theta_u`` within
     ``cutoff_deg`` (grazing pixels have the least reliable normals and footprints; the same 80-degree
-    cutoff as :func:`polyjax.fit_polynomial`).
+    cutoff as :func:`polyjax.fit_polynomial`). The rows come from :func:`polyjax.image_rows`, which
+    ``baselines.fit_to_images`` shares.
 
     **Pixel weighting**: residuals are measured in radiance, the quantity the images hold, with weight
     ``w_px`` (``pixel_weights``, 1 by default): the maximum-likelihood fit for pixel noise of constant
@@ -105,22 +107,21 @@ def fit_polynomial_to_images(
         InputError: scenes/images disagree in number or size, an image is not ``(H, W, 3)``, bad options,
             or a scene with inter-reflections.
     """
-    from .render._linear import light_samples
-    from .render._scene import Scene
+    vs = _check_options(variables, degree, basis, method)
+    rows = image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
+                      cutoff_deg=cutoff_deg, spp=spp, seed=seed)
+    u, v, c, y, wpx, keep = rows.u, rows.v, rows.weight, rows.values, rows.pixel_weights, rows.keep
+    # one design for the three channels when every light is grey (the same weights in R, G and B)
+    shared = False
+    if _concrete(c):
+        cn = np.asarray(c)
+        shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
+    return _solve(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
+                  interactions=bool(interactions), method=method, rcond=rcond, shared=shared)
 
-    scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
-    if not scenes:
-        raise InputError("scenes: expected at least one polyjax.render.Scene")
-    for i, s in enumerate(scenes):
-        if not isinstance(s, Scene):
-            raise InputError(f"scenes[{i}]: expected a polyjax.render.Scene, found {type(s).__name__}")
-    if isinstance(images, (list, tuple)):
-        images = list(images)
-    else:
-        arr = jnp.asarray(images)
-        images = [arr] if arr.ndim == 3 else list(arr)
-    if len(images) != len(scenes):
-        raise InputError(f"images: expected one image per scene ({len(scenes)}), found {len(images)}")
+
+def _check_options(variables, degree, basis, method):
+    """The variable set of ``variables``; raises :class:`InputError` for a bad degree, basis or method."""
     vs = get_variables(variables)
     if basis not in BASES:
         raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
@@ -128,70 +129,7 @@ def fit_polynomial_to_images(
         raise InputError(f"method: expected one of {METHODS}, found {method!r}")
     if np.ndim(degree) != 0 or int(degree) != degree or int(degree) < 0:
         raise InputError(f"degree: expected one non-negative integer, found {degree!r}")
-    if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
-        raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
-    if int(spp) < 1:
-        raise InputError(f"spp: expected at least 1 sample per pixel, found {spp}")
-    degree = int(degree)
-    if pixel_weights is None:
-        pixel_weights = [None] * len(scenes)
-    elif not isinstance(pixel_weights, (list, tuple)):
-        pw = jnp.asarray(pixel_weights)
-        pixel_weights = list(pw) if pw.ndim in (1, 3) else [pw] * len(scenes)
-    if len(pixel_weights) != len(scenes):
-        raise InputError(f"pixel_weights: expected one entry per scene ({len(scenes)}), found {len(pixel_weights)}")
-
-    dtype = jnp.result_type(float)
-    vl, ul, cw, point, keep, y, wpx = [], [], [], [], [], [], []
-    for i, (scene, img, pw) in enumerate(zip(scenes, images, pixel_weights)):
-        img = jnp.asarray(img)
-        h, w = scene.camera.height, scene.camera.width
-        if img.shape != (h, w, 3):
-            raise InputError(f"images[{i}]: expected linear RGB of shape ({h}, {w}, 3) (its scene's camera), "
-                             f"found {img.shape}")
-        if not jnp.issubdtype(img.dtype, jnp.floating):
-            img = img.astype(dtype)
-        img = img.astype(dtype).reshape(-1, 3)
-        pw = jnp.ones((h * w,), dtype) if pw is None else jnp.broadcast_to(jnp.asarray(pw, dtype), (h, w)).reshape(-1)
-        if _concrete(pw) and (not np.all(np.isfinite(np.asarray(pw))) or np.any(np.asarray(pw) < 0)):
-            raise InputError(f"pixel_weights[{i}]: expected finite, non-negative weights")
-        ls = light_samples(scene, target, spp=spp, seed=seed, dtype=dtype)
-        ok = ls.on_target & ~ls.shadowed & jnp.all(jnp.isfinite(img), axis=-1) & (pw > 0)
-        if saturation is not None:
-            ok = ok & jnp.all(img < saturation, axis=-1)
-        lit = jnp.sum(ls.weight, axis=-1) > 0  # (N, J)
-        ok = ok & jnp.any(lit, axis=-1) & (ls.v[:, 2] > 0)
-        if cutoff_deg is not None:
-            c = jnp.cos(jnp.deg2rad(cutoff_deg))
-            grazing = jnp.any(lit & ls.is_point[None, :] & (ls.u[..., 2] < c), axis=-1)
-            ok = ok & (ls.v[:, 2] >= c) & ~grazing
-        vl.append(ls.v)
-        ul.append(ls.u)
-        cw.append(ls.weight)
-        point.append(ls.is_point)
-        keep.append(ok)
-        y.append(img)
-        wpx.append(pw)
-    n_j = max(u.shape[1] for u in ul)
-    pad = lambda a: jnp.pad(a, ((0, 0), (0, n_j - a.shape[1]), (0, 0)))  # noqa: E731  (zero weight: no light)
-    v = jnp.concatenate(vl)
-    u = jnp.concatenate([pad(a) for a in ul])
-    c = jnp.concatenate([pad(a) for a in cw])
-    keep = jnp.concatenate(keep)
-    y = jnp.where(keep[:, None], jnp.concatenate(y), 0.0)
-    wpx = jnp.where(keep, jnp.concatenate(wpx), 0.0)
-    c = jnp.where(keep[:, None, None], c, 0.0)
-    shared = False
-    if _concrete((keep, c)):
-        # concrete selection: solve on the kept pixels only, and with one design for the three channels
-        # when every light is grey (the same weights in R, G and B)
-        idx = np.flatnonzero(np.asarray(keep))
-        if idx.size:
-            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
-        cn = np.asarray(c)
-        shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
-    return _solve(u, v, c, y, wpx, keep, variables=vs.name, degree=degree, basis=basis, interactions=bool(interactions),
-                  method=method, rcond=rcond, shared=shared)
+    return vs
 
 
 @functools.partial(

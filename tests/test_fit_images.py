@@ -188,3 +188,19 @@ def test_no_usable_pixel_is_flagged_not_raised():
     assert np.all(np.asarray(model.status) == pj.FitStatus.NO_SAMPLES)
     assert np.all(np.asarray(model.n_used) == 0) and np.all(np.isinf(np.asarray(model.l2)))
     assert np.all(np.asarray(model.coefficients) == 0.0)
+
+
+def test_image_rows_are_the_render():
+    """pj.image_rows: on every kept pixel sum_j c_j f(u_j, v) is the image (point, directional, environment, shadows),
+    and the rows kept are the pixels fit_polynomial_to_images counts."""
+    scenes = _scenes()[2:] + _mixed_scenes()
+    images = _images(scenes, PHONG, spp=8)
+    rows = pj.image_rows(scenes, images, spp=8)
+    assert rows.u.shape[1] == 9 and int(rows.keep.sum()) == rows.u.shape[0] > 500
+    f = PHONG(rows.u, jnp.broadcast_to(rows.v[:, None, :], rows.u.shape))
+    np.testing.assert_allclose(np.asarray(jnp.sum(rows.weight * f, axis=1)), np.asarray(rows.values), rtol=1e-12,
+                               atol=1e-14)
+    fit = pj.fit_polynomial_to_images(scenes, images, degree=2, spp=8)
+    assert int(fit.n_used[0]) == rows.u.shape[0]
+    full = pj.image_rows(scenes, images, spp=8, compact=False)
+    assert full.u.shape[0] == 4 * SIZE * SIZE and int(full.keep.sum()) == rows.u.shape[0]
