@@ -76,9 +76,8 @@ def fit_to_images(
         saturation: pixels with a channel at or above this value are excluded; None keeps every finite pixel.
         cutoff_deg: grazing cutoff in degrees; None keeps every lit pixel above the horizon.
         spp, seed: environment samples per pixel and their seed (scenes with an environment map). The samples are
-            those of a render with the same ``spp`` and ``seed`` when the map is built outside ``jit`` (a map built
-            inside draws from other sampling tables, :mod:`polyjax.render`): then the fit sees the render's own
-            estimate.
+            those of a render with the same ``spp`` and ``seed`` (whether the map is built inside ``jit`` or not),
+            so the fit sees the render's own estimate.
         fit_options: passed to :func:`baselines.fit` under one light sample per pixel (``max_steps``, ``rtol``,
             ``backend``, ...); with several, only ``max_steps``, ``rtol``, ``atol``, ``stage_steps`` and ``throw``.
 

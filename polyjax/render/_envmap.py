@@ -152,8 +152,8 @@ def pool_indices(env: EnvironmentLight, n: int, seed: int = 0):
     estimator, an unbiased estimate of the derivative of the integral).
 
     When the map's sampling tables are traced (the map was built inside ``jit``/``grad``, or passed into
-    ``jit`` as an argument), the pool is drawn in JAX with ``jax.random`` instead (the same distribution,
-    another random stream, so other pixels than an eager render's).
+    ``jit`` as an argument), the same uniforms (numpy, from ``seed``; they do not depend on the map) are
+    inverted through the traced tables in JAX, so a traced render draws the same pixels as an eager one.
 
     Returns:
         ``(d, k, 1 / pdf)``: ``(n, 3)`` directions, ``(n,)`` flat pixel indices, ``(n,)`` inverse densities.
@@ -161,22 +161,29 @@ def pool_indices(env: EnvironmentLight, n: int, seed: int = 0):
     h, w, _ = env.image.shape
     if isinstance(env.pmf, jax.core.Tracer):
         return _pool_traced(env, n, seed)
+    x0, perm, ri, rj = _pool_uniforms(n, seed)
     pmf = np.asarray(env.pmf, dtype=np.float64)
     cdf = np.cumsum(pmf)
     cdf /= cdf[-1]
-    rng = np.random.default_rng(seed)
-    # stratified in the pixel-selection coordinate, then shuffled: a low-variance pool
-    x0 = (np.arange(n) + rng.random(n)) / n
     k = np.clip(np.searchsorted(cdf, x0, side="right"), 0, h * w - 1)
-    k = k[rng.permutation(n)]
+    k = k[perm]
     i, j = k // w, k % w
-    theta = (i + rng.random(n)) * np.pi / h
-    phi = (j + rng.random(n)) * 2 * np.pi / w - np.pi
+    theta = (i + ri) * np.pi / h
+    phi = (j + rj) * 2 * np.pi / w - np.pi
     st = np.sin(theta)
     d = np.stack([st * np.sin(phi), np.cos(theta), -st * np.cos(phi)], axis=-1)
     p = pmf[k]
     inv_pdf = np.where(p > 0, 2 * np.pi**2 * st / (np.where(p > 0, p, 1.0) * h * w), 0.0)
     return d, k, inv_pdf
+
+
+def _pool_uniforms(n: int, seed: int):
+    """The pool's random numbers, which do not depend on the map: the pixel-selection coordinate stratified
+    over ``n`` strata, the shuffle, and the jitter within the chosen pixel (rows, columns)."""
+    rng = np.random.default_rng(seed)
+    x0 = (np.arange(n) + rng.random(n)) / n
+    perm = rng.permutation(n)
+    return x0, perm, rng.random(n), rng.random(n)
 
 
 def _pool_traced(env: EnvironmentLight, n: int, seed: int):
@@ -185,13 +192,12 @@ def _pool_traced(env: EnvironmentLight, n: int, seed: int):
     pmf = jax.lax.stop_gradient(env.pmf)
     cdf = jnp.cumsum(pmf)
     cdf = cdf / cdf[-1]
-    k0, k1, k2, k3 = jax.random.split(jax.random.PRNGKey(seed), 4)
-    x0 = (jnp.arange(n, dtype=dtype) + jax.random.uniform(k0, (n,), dtype)) / n
-    k = jnp.clip(jnp.searchsorted(cdf, x0, side="right"), 0, h * w - 1)
-    k = k[jax.random.permutation(k1, n)]
+    x0, perm, ri, rj = (jnp.asarray(a) for a in _pool_uniforms(n, seed))
+    k = jnp.clip(jnp.searchsorted(cdf, x0.astype(dtype), side="right"), 0, h * w - 1)
+    k = k[perm]
     i, j = k // w, k % w
-    theta = (i + jax.random.uniform(k2, (n,), dtype)) * jnp.pi / h
-    phi = (j + jax.random.uniform(k3, (n,), dtype)) * 2 * jnp.pi / w - jnp.pi
+    theta = (i + ri.astype(dtype)) * jnp.pi / h
+    phi = (j + rj.astype(dtype)) * 2 * jnp.pi / w - jnp.pi
     st = jnp.sin(theta)
     d = jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], axis=-1)
     p = pmf[k]
