@@ -4,7 +4,19 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, safe_pow, schlick, uniform_sampler
+from ._common import (
+    POSITIVE,
+    UNIT,
+    BaselineModel,
+    Geometry,
+    LogBounded,
+    diffuse_specular_columns,
+    grid,
+    lobe,
+    safe_pow,
+    schlick,
+    uniform_sampler,
+)
 
 
 def ashikhmin_shirley(params, u, v):
@@ -35,18 +47,13 @@ def _specular(n, f0, g):
     return lobe(g, spec)
 
 
-def _columns(nl, u, v):
-    g = Geometry(u, v)
-    return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), _specular(nl[0], nl[1], g)], axis=-1)
-
-
 MODEL = BaselineModel(
     name="ashikhmin-shirley",
     param_names=("rho_d", "rho_s", "n", "F0"),
     transforms=(POSITIVE, POSITIVE, LogBounded(0.1, 1e5), UNIT),
     evaluate=ashikhmin_shirley,
     n_linear=2,
-    columns=_columns,
+    columns=diffuse_specular_columns(_specular),
     guesses=grid([2.0, 10.0, 50.0, 300.0], [0.1, 0.6]),
     sample=uniform_sampler([(0.5, 2000.0, True), (0.02, 0.95, False)]),
     reference="Ashikhmin & Shirley, J. Graphics Tools 5(2) 2000",

@@ -221,11 +221,13 @@ def schlick(f0, cos_d):
 
 
 def diffuse_specular_columns(specular: Callable) -> Callable:
-    """``columns(nl, u, v)`` of a model ``rho_d / pi + rho_s specular(alpha, g)`` (Ward, Ward-Duer): the diffuse
-    column ``1 / pi`` and the specular lobe at ``alpha = nl[0]``, the two parameters that enter linearly."""
+    """``columns(nl, u, v)`` of a model ``rho_d / pi + rho_s specular(*nl, g)`` (Ward, Ward-Duer, anisotropic Ward,
+    Cook-Torrance, Ashikhmin-Shirley): the diffuse column ``1 / pi`` and the specular lobe at the nonlinear
+    parameters ``nl`` (e.g. ``alpha``; ``m, F0``), the columns of the two parameters that enter linearly."""
 
     def columns(nl, u, v):
         g = Geometry(u, v)
-        return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), specular(nl[0], g)], -1)
+        lobe_ = specular(*(nl[i] for i in range(nl.shape[0])), g)
+        return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), lobe_], -1)
 
     return columns

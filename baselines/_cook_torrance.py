@@ -4,7 +4,18 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, schlick, uniform_sampler
+from ._common import (
+    POSITIVE,
+    UNIT,
+    BaselineModel,
+    Geometry,
+    LogBounded,
+    diffuse_specular_columns,
+    grid,
+    lobe,
+    schlick,
+    uniform_sampler,
+)
 
 
 def _specular(m, f0, g):
@@ -39,18 +50,13 @@ def cook_torrance(params, u, v):
     return rho_d / jnp.pi + rho_s * _specular(m, f0, Geometry(u, v))
 
 
-def _columns(nl, u, v):
-    g = Geometry(u, v)
-    return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), _specular(nl[0], nl[1], g)], -1)
-
-
 MODEL = BaselineModel(
     name="cook-torrance",
     param_names=("rho_d", "rho_s", "m", "F0"),
     transforms=(POSITIVE, POSITIVE, LogBounded(1e-3, 3.0), UNIT),
     evaluate=cook_torrance,
     n_linear=2,
-    columns=_columns,
+    columns=diffuse_specular_columns(_specular),
     guesses=grid([0.6, 0.3, 0.15, 0.07], [0.1, 0.6]),
     sample=uniform_sampler([(0.02, 1.5, True), (0.02, 0.95, False)]),
     reference="Cook & Torrance, ACM TOG 1(1) 1982",

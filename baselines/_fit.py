@@ -69,7 +69,9 @@ def fit(
     nonfinite: str = "error",
     throw: bool = False,
 ) -> BaselineFit:
-    r"""Fit a baseline BRDF model to measurements, every lane (material, channel) in one batched call.
+    r"""Fit a baseline BRDF model to measurements, every lane (material, channel) in one batched call. (Over 80
+    lines because this docstring documents every argument; the body is named steps: checks,
+    :func:`polyjax.prepare_inputs`, the kernel, the result.)
 
     Minimises ``sum_i w_i cos^2(theta_u,i) (b_i - f(u_i, v_i))^2`` over the samples with
     ``theta_u, theta_v <= cutoff_deg`` (the polynomial fit's objective, paper equation (11)) by
@@ -138,18 +140,30 @@ def fit(
         backend = "lstsq"
     else:
         raw0 = _check_starts(model, starts, inp.values.dtype, inp.batch, max_steps, limit_steps)
-        n_starts = n_starts if raw0 is None else raw0.shape[1]
-        sg = jax.lax.stop_gradient  # the solver loops see constants; the optimum differentiates implicitly
         opts = dict(
-            n_starts=int(n_starts), max_steps=int(max_steps), rtol=float(rtol), atol=float(atol),
-            stage_steps=int(min(stage_steps, max_steps)), refine=None if refine is None else int(refine),
-            limit_steps=int(limit_steps),
+            n_starts=int(n_starts if raw0 is None else raw0.shape[1]), max_steps=int(max_steps), rtol=float(rtol),
+            atol=float(atol), stage_steps=int(min(stage_steps, max_steps)),
+            refine=None if refine is None else int(refine), limit_steps=int(limit_steps),
         )
-        args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
-                jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
-        out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
-        out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
-        out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
+        out = _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend, opts)
+    return _result(model, backend, inp, out, throw)
+
+
+def _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> dict:
+    """The multi-start kernel of ``backend`` on constants, then the kept optimum with its implicit derivative:
+    a dict of ``(B, ...)`` arrays, the fields of :class:`BaselineFit`."""
+    sg = jax.lax.stop_gradient  # the solver loops see constants; the optimum differentiates implicitly
+    args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
+            jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
+    out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
+    out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
+    out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
+    return out
+
+
+def _result(model, backend: str, inp, out: dict, throw: bool) -> BaselineFit:
+    """The :class:`BaselineFit` of the kernel's ``out`` in the batch shape of the inputs, with its result codes
+    (raised with ``throw``)."""
     # one result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     # NONFINITE, as in the polynomial fit
     status = out["status"]

@@ -2,7 +2,8 @@
 each lane to convergence, the best converged start kept, and a kept start that ran out of steps next to its
 parameters' range limits put on them and finished (see :func:`baselines.fit`). Each stage is a separate solve (a
 separate traced loop); the optimistix backend runs the same schedule through one loop (:mod:`baselines._multistart`).
-Also the shared pieces of both: the pick of the best start and the packaging of the kept one (:func:`finish`)."""
+Also the shared pieces of both: the lanes' weights and starts (:func:`prepare_lanes`), the pick of the best start
+and the packaging of the kept one (:func:`finish`)."""
 
 from __future__ import annotations
 
@@ -50,18 +51,11 @@ def staged_kernel(
     """Every start of every lane ``y (B, n)``: stage 1 (``stage_steps``), stage 2 (the ``refine`` best to
     convergence), the pick of the best start, and up to two range-limit rounds; a dict of ``(B, ...)`` arrays.
 
-    One jitted function (longer than the project's usual 80 lines) so that the stages, the pick and the
-    range-limit rounds compile into one program; each stage is a call of :func:`run_starts`.
+    One jitted function so that the stages, the pick and the range-limit rounds compile into one program; each
+    stage is a call of :func:`run_starts`.
     """
     model = get_model(name)
-    den = jnp.sum(wl, axis=-1, keepdims=True)
-    sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
-    # residuals in units of the data's own L2 (the L2 of f = 0), so the tolerances are relative
-    scale = jnp.sqrt(jnp.sum(sw * sw * y * y, axis=-1, keepdims=True))
-    scale = jnp.where(scale > 0, scale, 1.0)
-    sw = sw / scale
-    if raw0 is None:
-        raw0 = make_starts(model, u, v, y, wc2, key, n_starts)
+    sw, scale, raw0 = prepare_lanes(model, u, v, y, wl, wc2, key, raw0, n_starts)
     nb, ns, _ = raw0.shape
     take = lambda a, idx: jnp.take_along_axis(a, idx, axis=1)  # noqa: E731
     if refine is None or refine >= ns:
@@ -120,6 +114,20 @@ def staged_kernel(
     raw_b, code_b, l2_b, steps_b = state
     return finish(model, wc2, raw0, dict(
         code=code, sl2=sl2, best=best, raw_b=raw_b, code_b=code_b, l2_b=l2_b, steps_b=steps_b))
+
+
+def prepare_lanes(model, u, v, y, wl, wc2, key, raw0, n_starts):
+    """What both kernels solve with: ``(sw, scale, raw0)``, the residuals' square-root weights ``sw (B, n)``
+    (``sqrt(w cos^2 / sum w)`` of equation (11)) divided by the data's own L2 ``scale (B, 1)`` (the L2 of
+    ``f = 0``; 1 where that is 0), so that the solver's tolerances are relative, and the starts ``raw0 (B, S, P)``
+    (``n_starts`` made by :func:`baselines._starts.starts` when ``raw0`` is None)."""
+    den = jnp.sum(wl, axis=-1, keepdims=True)
+    sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
+    scale = jnp.sqrt(jnp.sum(sw * sw * y * y, axis=-1, keepdims=True))
+    scale = jnp.where(scale > 0, scale, 1.0)
+    if raw0 is None:
+        raw0 = make_starts(model, u, v, y, wc2, key, n_starts)
+    return sw / scale, scale, raw0
 
 
 def finish(model, wc2, raw0, c):

@@ -16,9 +16,16 @@ from ._common import (
 )
 
 
-def _specular(alpha, g):
+def ward_lobe(alpha, g, normalise):
+    """Ward's Gaussian lobe ``exp(-tan^2 delta / alpha^2) / normalise(4 pi alpha^2, g)``, 0 below the horizon: the
+    normalisation (``4 pi alpha^2 sqrt(cos_u cos_v)`` for Ward, ``4 pi alpha^2 cos_u cos_v`` for Ward-Duer) is
+    the models' only difference."""
     a2 = alpha * alpha
-    return lobe(g, jnp.exp(-g.tan2_h / a2) / (4.0 * jnp.pi * a2 * jnp.sqrt(g.cu * g.cv)))
+    return lobe(g, jnp.exp(-g.tan2_h / a2) / normalise(4.0 * jnp.pi * a2, g))
+
+
+def _specular(alpha, g):
+    return ward_lobe(alpha, g, lambda s, g: s * jnp.sqrt(g.cu * g.cv))
 
 
 def ward(params, u, v):

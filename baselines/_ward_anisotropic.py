@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
+from ._common import (
+    POSITIVE,
+    BaselineModel,
+    Geometry,
+    LogBounded,
+    diffuse_specular_columns,
+    grid,
+    lobe,
+    uniform_sampler,
+)
 
 
 def _specular(ax, ay, g):
@@ -35,18 +44,13 @@ def ward_anisotropic(params, u, v):
     return params[0] / jnp.pi + params[1] * _specular(params[2], params[3], Geometry(u, v))
 
 
-def _columns(nl, u, v):
-    g = Geometry(u, v)
-    return jnp.stack([jnp.full_like(g.cu, 1.0 / jnp.pi), _specular(nl[0], nl[1], g)], -1)
-
-
 MODEL = BaselineModel(
     name="ward-anisotropic",
     param_names=("rho_d", "rho_s", "alpha_x", "alpha_y"),
     transforms=(POSITIVE, POSITIVE, LogBounded(1e-3, 3.0), LogBounded(1e-3, 3.0)),
     evaluate=ward_anisotropic,
     n_linear=2,
-    columns=_columns,
+    columns=diffuse_specular_columns(_specular),
     guesses=grid([0.3, 0.1, 0.6], [0.3, 0.1, 0.6])[[0, 4, 8, 1, 3, 2, 6, 5, 7]],
     sample=uniform_sampler([(0.02, 1.5, True), (0.02, 1.5, True)]),
     reference="Ward, SIGGRAPH 1992",

@@ -1,24 +1,19 @@
-"""Ward-Duer (Ward's lobe with Duer's normalisation, Lambertian diffuse)."""
+"""Ward-Duer (Ward's lobe with Duer's normalisation, Lambertian diffuse): the Ward model (:mod:`baselines._ward`)
+with another normalisation, its parameters, ranges and starts unchanged."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax.numpy as jnp
 
-from ._common import (
-    POSITIVE,
-    BaselineModel,
-    Geometry,
-    LogBounded,
-    diffuse_specular_columns,
-    grid,
-    lobe,
-    uniform_sampler,
-)
+from ._common import Geometry, diffuse_specular_columns
+from ._ward import MODEL as WARD
+from ._ward import ward_lobe
 
 
 def _specular(alpha, g):
-    a2 = alpha * alpha
-    return lobe(g, jnp.exp(-g.tan2_h / a2) / (4.0 * jnp.pi * a2 * g.cu * g.cv))
+    return ward_lobe(alpha, g, lambda s, g: s * g.cu * g.cv)
 
 
 def ward_duer(params, u, v):
@@ -30,24 +25,12 @@ def ward_duer(params, u, v):
     Reference: A. Duer, "An improved normalization for the Ward reflectance model", Journal of
     Graphics Tools 11(1), 2006; as fitted by Ngan, Durand, Matusik 2005.
 
-    Args:
-        params: ``(rho_d, rho_s, alpha)``: diffuse albedo, specular albedo, roughness in (1e-3, 3).
-        u, v: ``(..., 3)`` light and view directions.
-
-    Returns:
-        ``f`` with the shape of ``u[..., 0]``; the lobe is 0 below the horizon.
+    Args, returns: as :func:`baselines.ward` (``params = (rho_d, rho_s, alpha)``, alpha in (1e-3, 3)).
     """
     return params[0] / jnp.pi + params[1] * _specular(params[2], Geometry(u, v))
 
 
-MODEL = BaselineModel(
-    name="ward-duer",
-    param_names=("rho_d", "rho_s", "alpha"),
-    transforms=(POSITIVE, POSITIVE, LogBounded(1e-3, 3.0)),
-    evaluate=ward_duer,
-    n_linear=2,
-    columns=diffuse_specular_columns(_specular),
-    guesses=grid([0.3, 0.1, 0.6, 0.05, 0.2, 1.0]),
-    sample=uniform_sampler([(0.02, 1.5, True)]),
+MODEL = dataclasses.replace(
+    WARD, name="ward-duer", evaluate=ward_duer, columns=diffuse_specular_columns(_specular),
     reference="Duer, J. Graphics Tools 11(1) 2006",
 )

@@ -73,12 +73,12 @@ ZERO_MODEL_RATIO = 0.95
 
 
 def cmd_fit(args) -> int:
-    import numpy as np
+    """Run ``polyjax fit``: fit the model of ``--model`` to the dataset, optionally save it, and report every lane's
+    L2, status and coefficients (text, or one JSON object with ``--json``); returns the exit status."""
 
     import polyjax as pj
 
-    from ._cache import compile_notice
-    from ._kinds import fitter_for, kind_of
+    from ._kinds import fitter_for
     from ._outputs import check_output_file
 
     degrees = _parse_degrees(args.degree)
@@ -88,9 +88,30 @@ def cmd_fit(args) -> int:
     if args.save:
         check_output_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
+    model, l2, elapsed = _run_fit(args, data, kind, model_name, degree)
+    if args.save:
+        pj.save_model(args.save, model)
+    out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, elapsed)
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    if synthetic:
+        print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
+    _print_fit(args, out, model, beta)
+    return 0
+
+
+def _run_fit(args, data, kind, model_name, degree):
+    """The fit of ``polyjax fit`` (``kind`` None: the polynomial) -> ``(model, l2 array, seconds)``."""
+    import numpy as np
+
+    import polyjax as pj
+
+    from ._cache import compile_notice
+
     t0 = time.perf_counter()
     with compile_notice("the fit", getattr(args, "cache_in_use", None)):
-        if polynomial:
+        if kind is None:
             model = pj.fit_polynomial(
                 data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
                 cutoff_deg=args.cutoff,
@@ -98,7 +119,16 @@ def cmd_fit(args) -> int:
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
         l2 = np.asarray(model.l2)
-    elapsed = time.perf_counter() - t0
+    return model, l2, time.perf_counter() - t0
+
+
+def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, elapsed):
+    """The JSON record of ``polyjax fit`` and the coefficients (or parameters) as one array."""
+    import numpy as np
+
+    from ._kinds import kind_of
+
+    polynomial = model_name == "polynomial"
     if polynomial:
         beta = model.paper_coefficients() if not args.interactions else np.asarray(model.coefficients)
         form = "paper eq. (3): beta_0, then Z_1..Z_k, Z_1^2..Z_k^2, ..." if not args.interactions else "basis"
@@ -109,25 +139,11 @@ def cmd_fit(args) -> int:
         beta = np.asarray(model.params)
         form = "parameters: " + ", ".join(model.param_names)
         n_params = int(beta.shape[-1])
-    if args.save:
-        pj.save_model(args.save, model)
     status_names = kind_of(model).status_names
     status = [status_names[int(c)] if 0 <= int(c) < len(status_names) else str(int(c))
               for c in np.asarray(model.status).ravel()]
     labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
-    zero = np.asarray(pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=args.cutoff,
-                                  mask=data.mask))
-    zero = np.broadcast_to(zero, l2.shape)
-    barely = (zero > 0) & np.isfinite(l2) & (l2 > ZERO_MODEL_RATIO * zero)
-    warnings_ = []
-    if barely.any():
-        lanes = [f"{labels[i]} ({e:.4g} vs {z:.4g})" for i, (e, z, b) in
-                 enumerate(zip(l2.ravel(), zero.ravel(), barely.ravel())) if b]
-        warnings_.append(
-            f"{len(lanes)} fit(s) barely beat the zero model f = 0 (L2 above {ZERO_MODEL_RATIO:g} of its L2): "
-            + "; ".join(lanes)
-            + ". The model cannot follow this data (e.g. a narrow peak); try another model or degree."
-        )
+    zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff)
     out = {
         "source": data.source,
         "synthetic": synthetic,
@@ -149,28 +165,54 @@ def cmd_fit(args) -> int:
     if polynomial:
         out["rank"] = np.asarray(model.rank).tolist()
         out["condition"] = np.asarray(model.condition).tolist()
-    if args.json:
-        print(json.dumps(out))
-        return 0
-    if synthetic:
-        print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
-    print(f"data: {data.source}")
+    return out, beta
+
+
+def _zero_model_check(data, l2, labels, cutoff):
+    """The L2 of ``f = 0`` per lane (the shape of ``l2``) and a warning naming the lanes whose fit barely beats it
+    (L2 above :data:`ZERO_MODEL_RATIO` of it), or no warning."""
+    import numpy as np
+
+    import polyjax as pj
+
+    zero = np.asarray(pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=cutoff,
+                                  mask=data.mask))
+    zero = np.broadcast_to(zero, l2.shape)
+    barely = (zero > 0) & np.isfinite(l2) & (l2 > ZERO_MODEL_RATIO * zero)
+    warnings_ = []
+    if barely.any():
+        lanes = [f"{labels[i]} ({e:.4g} vs {z:.4g})" for i, (e, z, b) in
+                 enumerate(zip(l2.ravel(), zero.ravel(), barely.ravel())) if b]
+        warnings_.append(
+            f"{len(lanes)} fit(s) barely beat the zero model f = 0 (L2 above {ZERO_MODEL_RATIO:g} of its L2): "
+            + "; ".join(lanes)
+            + ". The model cannot follow this data (e.g. a narrow peak); try another model or degree."
+        )
+    return zero, warnings_
+
+
+def _print_fit(args, out: dict, model, beta) -> None:
+    """The text report of ``polyjax fit`` from its JSON record ``out``."""
+    import numpy as np
+
+    polynomial = out["model"] == "polynomial"
+    n_params, status = out["n_params"], out["status"]
+    print(f"data: {out['source']}")
     if polynomial:
         counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
         print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
               f"basis={args.basis}")
     else:
-        print(f"model: {model_name}, {n_params} parameters ({', '.join(model.param_names)})")
+        print(f"model: {out['model']}, {n_params} parameters ({', '.join(model.param_names)})")
     flat_beta = beta.reshape(-1, beta.shape[-1])
     cond = np.asarray(model.condition).ravel() if polynomial else None
-    for i, (label, e) in enumerate(zip(labels, l2.ravel())):
+    for i, (label, e) in enumerate(zip(out["labels"], np.asarray(out["l2"]).ravel())):
         extra = f"   cond = {cond[i]:.3g}" if polynomial else ""
         print(f"  {label:<22s} L2 = {e:.5f}{extra}   {status[i]}")
         print(("    beta = " if polynomial else "    params = ") + " ".join(f"{b:+.5g}" for b in flat_beta[i]))
-    for w in warnings_:
+    for w in out["warnings"]:
         print(f"WARNING: {w}")
-    print(f"fit time (including compilation): {elapsed:.3f} s")
-    return 0
+    print(f"fit time (including compilation): {out['seconds']:.3f} s")
 
 
 def cmd_report(args) -> int:

@@ -44,79 +44,110 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     :func:`jax.lax.map` over blocks, ``vmap`` inside a block, so memory is bounded by the block, not the batch.
     Only the shared-design path is ever streamed.
     """
-    u, v, values = inp.u, inp.v, inp.values
-    var_fn = get_variables(variables).fn
     k = get_variables(variables).k
+    active = jnp.asarray(term_degrees(k, max_degree, interactions))[None, :] <= degrees[:, None]  # (D, m)
+    lane = functools.partial(_lane, active=active, max_degree=max_degree, basis=basis, interactions=interactions,
+                             method=method, rcond=rcond)
+    if inp.shared:
+        fitted = _fit_shared(inp, active, lane, variables=variables, max_degree=max_degree, basis=basis,
+                             interactions=interactions, rcond=rcond, cutoff_deg=cutoff_deg, stream=stream,
+                             geometry=geometry)
+    else:
+        fitted = _fit_groups(inp, active.shape[0], lane, variables=variables, cutoff_deg=cutoff_deg,
+                             lane_block=lane_block)
+    out = _outputs(inp, degrees, *fitted)
+    if batch is None:  # a sharded fit's block of lanes: (D, B_local, ...), reshaped outside the shard_map
+        return out
+    lead = () if scalar else (degrees.shape[0],)  # (D, B, ...) -> (D?, *batch, ...) inside the program
+    return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
 
-    def samples():  # computed where used: a streamed fit from a given geometry never needs them
-        x = var_fn(u, v)
-        w, wc2 = fit_weights(u, v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
-        return x, w, wc2
 
-    tdeg = jnp.asarray(term_degrees(k, max_degree, interactions))
-    active = tdeg[None, :] <= degrees[:, None]  # (D, m)
-    n_deg, nb = degrees.shape[0], values.shape[0]
+def _residual_l2(d, coef, y, wl, wc2l):
+    """The L2 of equation (11) of one right-hand side ``y (n,)`` fitted by ``coef (m,)`` on the design ``d``; 0 for
+    a perfect fit (not NaN: ``sqrt`` has no derivative at 0), ``inf`` for a lane with no samples."""
+    r = y - d @ coef
+    den = jnp.sum(wl)
+    num = jnp.sum(wc2l * r * r)
+    nz = (den > 0) & (num != 0)
+    l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
+    return jnp.where(den > 0, l2, jnp.inf)
 
-    def residual_l2(d, coef, y, wl, wc2l):  # coef (m,) ; y (n,)
-        r = y - d @ coef
-        den = jnp.sum(wl)
-        num = jnp.sum(wc2l * r * r)
-        nz = (den > 0) & (num != 0)  # sqrt has no derivative at 0: an empty lane or a perfect fit gets 0, not NaN
-        l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
-        return jnp.where(den > 0, l2, jnp.inf)
 
-    def lane(y, wl, wc2l, x):
-        """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees."""
-        keep = wl > 0
-        pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
-        sol = jax.vmap(lambda a: weighted_lstsq(d, y.T, wc2l, a, method=method, rcond=rcond))(active)
-        coef = jnp.swapaxes(sol.coefficients, 1, 2)  # (D, r, m)
-        l2 = jax.vmap(jax.vmap(lambda c, yy: residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
-        return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
+def _lane(y, wl, wc2l, x, *, active, max_degree, basis, interactions, method, rcond):
+    """One set of samples (the right-hand sides ``y (r, n)`` sharing it) fitted for all degrees (``active (D, m)``
+    terms): the transform ``(mean, rotation, centre, halfwidth)``, ``coef (D, r, m)``, ``l2 (D, r)``, rank,
+    condition and active terms ``(D,)``, samples used."""
+    keep = wl > 0
+    pca, centre, hw, d = fitted_design(x, keep, max_degree, basis, interactions)
+    sol = jax.vmap(lambda a: weighted_lstsq(d, y.T, wc2l, a, method=method, rcond=rcond))(active)
+    coef = jnp.swapaxes(sol.coefficients, 1, 2)  # (D, r, m)
+    l2 = jax.vmap(jax.vmap(lambda c, yy: _residual_l2(d, c, yy, wl, wc2l)), in_axes=(0, None))(coef, y)
+    return (pca.mean, pca.rotation, centre, hw), coef, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(keep)
+
+
+def _fit_shared(inp, active, lane, *, variables, max_degree, basis, interactions, rcond, cutoff_deg, stream,
+                geometry):
+    """Every lane on the one shared design: one factorisation, ``B`` right-hand sides; streamed (the design built
+    block by block and never held, from ``geometry`` when given) when ``stream``. :func:`_lane`'s outputs
+    broadcast to ``(D, B, ...)``."""
+    n_deg, nb = active.shape[0], inp.values.shape[0]
 
     def dense_shared():
-        x, w, wc2 = samples()
-        return lane(values, w[0], wc2[0], x)
+        x = get_variables(variables).fn(inp.u, inp.v)
+        w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)  # (L, n)
+        return lane(inp.values, w[0], wc2[0], x)
 
-    if inp.shared and stream:  # the same, the design built block by block and never held
+    if stream:
         geo = _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg) if geometry is None \
             else geometry
         tr, coef, l2, rank, cond, n_act, n_used = streamed_lane(
-            geo, values, active, max_degree=max_degree, basis=basis, interactions=interactions, rcond=rcond,
+            geo, inp.values, active, max_degree=max_degree, basis=basis, interactions=interactions, rcond=rcond,
             dense=dense_shared,
         )
-    if inp.shared and not stream:  # one design, one factorisation, nb right-hand sides
+    else:
         tr, coef, l2, rank, cond, n_act, n_used = dense_shared()
-    if inp.shared:
-        tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
-        rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
-        n_used = jnp.broadcast_to(n_used, (n_deg, nb))
-    else:  # groups of r lanes, each group with its own samples
-        n_groups = inp.groups
-        r = nb // n_groups
-        x_shared = None if inp.lane_directions else var_fn(u, v)
+    tr = tuple(jnp.broadcast_to(a, (n_deg, nb) + a.shape) for a in tr)
+    rank, cond, n_act = (jnp.broadcast_to(a[:, None], (n_deg, nb)) for a in (rank, cond, n_act))
+    return tr, coef, l2, rank, cond, n_act, jnp.broadcast_to(n_used, (n_deg, nb))
 
-        # per-group arrays are mapped over; (1, n) weights or masks (per-lane directions only) are shared
-        mapped = {"y": values.reshape(n_groups, r, -1)}
-        for name, a in (("w", inp.weights), ("m", inp.mask)):
-            if a.shape[0] > 1:
-                mapped[name] = a
-        if inp.lane_directions:
-            mapped.update(u=inp.u, v=inp.v)
 
-        def group(a):
-            ul, vl = (a["u"], a["v"]) if inp.lane_directions else (u, v)
-            x = var_fn(ul, vl) if inp.lane_directions else x_shared
-            wg, wc2g = fit_weights(ul, vl, a.get("w", inp.weights[0]), a.get("m", inp.mask[0]), cutoff_deg)
-            return lane(a["y"], wg, wc2g, x)
+def _fit_groups(inp, n_deg, lane, *, variables, cutoff_deg, lane_block):
+    """Groups of ``r`` lanes, each group with its own samples (weights, masks or directions), ``lane_block`` lanes
+    at a time; :func:`_lane`'s outputs with the lane axis ``(G r)`` after the degree axis: ``(D, B, ...)``."""
+    u, v, values = inp.u, inp.v, inp.values
+    var_fn = get_variables(variables).fn
+    nb, n_groups = values.shape[0], inp.groups
+    r = nb // n_groups
+    x_shared = None if inp.lane_directions else var_fn(u, v)
 
-        tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, mapped, batch_size=max(1, lane_block // r))
-        # (G, D, r, ...) -> lane axis (G r) after the degree axis
-        coef = jnp.swapaxes(coef, 0, 1).reshape((n_deg, nb) + coef.shape[3:])
-        l2 = jnp.swapaxes(l2, 0, 1).reshape(n_deg, nb)
-        rank, cond, n_act = (jnp.repeat(jnp.swapaxes(a, 0, 1), r, axis=1) for a in (rank, cond, n_act))
-        tr = tuple(jnp.broadcast_to(jnp.repeat(a, r, axis=0)[None], (n_deg, nb) + a.shape[1:]) for a in tr)
-        n_used = jnp.broadcast_to(jnp.repeat(n_used, r)[None], (n_deg, nb))
+    # per-group arrays are mapped over; (1, n) weights or masks (per-lane directions only) are shared
+    mapped = {"y": values.reshape(n_groups, r, -1)}
+    for name, a in (("w", inp.weights), ("m", inp.mask)):
+        if a.shape[0] > 1:
+            mapped[name] = a
+    if inp.lane_directions:
+        mapped.update(u=inp.u, v=inp.v)
+
+    def group(a):
+        ul, vl = (a["u"], a["v"]) if inp.lane_directions else (u, v)
+        x = var_fn(ul, vl) if inp.lane_directions else x_shared
+        wg, wc2g = fit_weights(ul, vl, a.get("w", inp.weights[0]), a.get("m", inp.mask[0]), cutoff_deg)
+        return lane(a["y"], wg, wc2g, x)
+
+    tr, coef, l2, rank, cond, n_act, n_used = jax.lax.map(group, mapped, batch_size=max(1, lane_block // r))
+    # (G, D, r, ...) -> lane axis (G r) after the degree axis
+    coef = jnp.swapaxes(coef, 0, 1).reshape((n_deg, nb) + coef.shape[3:])
+    l2 = jnp.swapaxes(l2, 0, 1).reshape(n_deg, nb)
+    rank, cond, n_act = (jnp.repeat(jnp.swapaxes(a, 0, 1), r, axis=1) for a in (rank, cond, n_act))
+    tr = tuple(jnp.broadcast_to(jnp.repeat(a, r, axis=0)[None], (n_deg, nb) + a.shape[1:]) for a in tr)
+    n_used = jnp.broadcast_to(jnp.repeat(n_used, r)[None], (n_deg, nb))
+    return tr, coef, l2, rank, cond, n_act, n_used
+
+
+def _outputs(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
+    """The fields of :class:`polyjax.PolynomialBRDF` as ``(D, B, ...)`` arrays, with the :class:`polyjax.Result`
+    code of every lane; a failed lane (no samples, non-finite values) has zero coefficients and L2 ``inf``."""
+    n_deg, nb = l2.shape
     bad = jnp.broadcast_to(inp.lane_bad[None, :], (n_deg, nb))
     status = jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE)  # an overflowing L2 is not OK
     status = jnp.where(rank < n_act, Result.RANK_DEFICIENT, status)
@@ -125,16 +156,12 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
-    out = dict(
-        coefficients=coef.astype(values.dtype),
+    return dict(
+        coefficients=coef.astype(inp.values.dtype),
         degree=jnp.broadcast_to(degrees[:, None], status.shape).astype(jnp.int32),
         mean=tr[0], rotation=tr[1], centre=tr[2], halfwidth=tr[3], l2=l2, rank=rank, condition=cond,
         n_used=n_used.astype(jnp.int32), status=status,
     )
-    if batch is None:  # a sharded fit's block of lanes: (D, B_local, ...), reshaped outside the shard_map
-        return out
-    lead = () if scalar else (n_deg,)  # (D, B, ...) -> (D?, *batch, ...) inside the program: no eager reshapes
-    return {key: (a[0] if scalar else a).reshape(lead + tuple(batch) + a.shape[2:]) for key, a in out.items()}
 
 
 def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
@@ -174,7 +201,8 @@ def _streamed_geometry(inp, degrees, **static):
     return geo
 
 
-def _check_options(basis, method, rank_deficient, degree):
+def _check_options(basis, method, rank_deficient, degree, lane_block):
+    """The options of :func:`fit_polynomial` checked; the degrees as a ``(D,)`` integer array."""
     if basis not in BASES:
         raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
     if method not in METHODS:
@@ -184,6 +212,8 @@ def _check_options(basis, method, rank_deficient, degree):
     degrees = np.atleast_1d(np.asarray(degree))
     if degrees.ndim != 1 or degrees.size == 0 or not np.issubdtype(degrees.dtype, np.integer) or np.any(degrees < 0):
         raise InputError(f"degree: expected a non-negative integer or a sequence of them, found {degree!r}")
+    if not isinstance(lane_block, (int, np.integer)) or isinstance(lane_block, bool) or lane_block < 1:
+        raise InputError(f"lane_block: expected a positive integer, found {lane_block!r}")
     return degrees
 
 
@@ -209,7 +239,9 @@ def fit_polynomial(
     eps: float = 1e-3,
     steps: int = 3,
 ) -> PolynomialBRDF:
-    r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form.
+    r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form. (Over 80 lines because
+    this docstring documents every argument; the body is four named steps: checks, :func:`polyjax.prepare_inputs`,
+    the compiled kernel, the result.)
 
     Minimises the Ngan et al. objective of equation (11),
     ``sum_i w_i cos^2(theta_u,i) (b_i - f(u_i, v_i))^2``, over the samples with ``theta_u`` and
@@ -279,9 +311,7 @@ def fit_polynomial(
     if isinstance(u, Measurements) and isinstance(v, str):
         u, v, variables = u, None, v
     vs = get_variables(variables)
-    degrees = _check_options(basis, method, rank_deficient, degree)
-    if not isinstance(lane_block, (int, np.integer)) or isinstance(lane_block, bool) or lane_block < 1:
-        raise InputError(f"lane_block: expected a positive integer, found {lane_block!r}")
+    degrees = _check_options(basis, method, rank_deficient, degree, lane_block)
     sharded = _input_sharding(u, v, values, weights, mask)
     inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg,
                                  nonfinite=nonfinite, lane_directions=True)
@@ -289,32 +319,42 @@ def fit_polynomial(
     m = n_terms(vs.k, max_degree, bool(interactions))
     check_parameter_count(f"degree={max_degree}, interactions={bool(interactions)}, variables={vs.name!r}", m, inp.n,
                           inp.values.dtype.itemsize)
-    scalar = np.ndim(degree) == 0
     static = dict(variables=vs.name, max_degree=max_degree, basis=basis, interactions=bool(interactions),
                   cutoff_deg=cutoff)
+    out = _run_kernel(inp, degrees, sharded, m, scalar=np.ndim(degree) == 0, method=method, rcond=rcond,
+                      lane_block=int(lane_block), static=static)
+    model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
+                           max_degree=max_degree)
+    return _raise_on_status(model) if throw or rank_deficient == "error" else model
+
+
+def _run_kernel(inp: PreparedInputs, degrees, sharded, m: int, *, scalar, method, rcond, lane_block, static) -> dict:
+    """:func:`_fit_kernel` on prepared inputs: on the devices the inputs are sharded over (each its own lanes,
+    dense; the result stays sharded, ``polyjax/_sharding.py``), or in one program, streamed when the shared design
+    is tall (``polyjax/_stream.py``); the fields of the result, shaped ``(D?, *batch, ...)``."""
     if sharded is None:
         # streamed only on the shared design (one set of samples for every lane, never per-lane directions)
         stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
                             is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
         geometry = _streamed_geometry(inp, degrees, **static) if stream else None
-        out = _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch,
-                          scalar=scalar, stream=stream, geometry=geometry, lane_block=int(lane_block), **static)
-    else:  # each device fits its own lanes, dense; the result stays sharded (polyjax/_sharding.py)
-        kernel = functools.partial(_fit_kernel, method=method, rcond=rcond, batch=None, scalar=False, stream=False,
-                                   lane_block=int(lane_block), **static)
-        out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))
-        lead = () if scalar else (degrees.size,)
-        out = {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
-    model = PolynomialBRDF(**out, variables=vs.name, basis=basis, interactions=bool(interactions),
-                           max_degree=max_degree)
-    if throw or rank_deficient == "error":
-        def describe(i):
-            at = lambda a: int(np.asarray(a)[i] if np.ndim(a) else a)  # noqa: E731
-            return (f"rank {at(model.rank)} of {at(model.n_params)} parameters, {at(model.n_used)} samples used after "
-                    "the cutoff and mask")
+        return _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch,
+                           scalar=scalar, stream=stream, geometry=geometry, lane_block=lane_block, **static)
+    kernel = functools.partial(_fit_kernel, method=method, rcond=rcond, batch=None, scalar=False, stream=False,
+                               lane_block=lane_block, **static)
+    out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))
+    lead = () if scalar else (degrees.size,)
+    return {key: (a[0] if scalar else a).reshape(lead + inp.batch + a.shape[2:]) for key, a in out.items()}
 
-        model = raise_on_status("fit_polynomial", model.status, model, describe)
-    return model
+
+def _raise_on_status(model: PolynomialBRDF) -> PolynomialBRDF:
+    """``throw=True``: :func:`polyjax.raise_on_status` naming the first lane that is not ``OK`` with its rank and
+    samples used."""
+    def describe(i):
+        at = lambda a: int(np.asarray(a)[i] if np.ndim(a) else a)  # noqa: E731
+        return (f"rank {at(model.rank)} of {at(model.n_params)} parameters, {at(model.n_used)} samples used after "
+                "the cutoff and mask")
+
+    return raise_on_status("fit_polynomial", model.status, model, describe)
 
 
 def _input_sharding(u, v, values, weights, mask):

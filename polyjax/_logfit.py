@@ -89,8 +89,16 @@ def fit_log_polynomial(
         Differentiable with respect to ``values``, ``weights`` and directions wherever
         :func:`polyjax.fit_polynomial` is (the step choice is piecewise constant).
     """
-    from ._fit import fit_polynomial
+    u, v, values, w, mask, variables, eps = _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask)
+    opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
+            "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
+    return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, eps=eps, steps=int(steps), floor=floor,
+                         start_power=start_power)
 
+
+def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):
+    """The arguments of :func:`fit_log_polynomial` checked (before any work) and converted: ``(u, v, values,
+    weights (*batch, n), mask, variables, eps)``, the arrays in the float type of ``values``."""
     if isinstance(u, Measurements):
         data = u
         if values is not None or (v is not None and not isinstance(v, str)):
@@ -108,7 +116,6 @@ def fit_log_polynomial(
         raise InputError(f"eps: expected a positive offset in 1/sr, found {eps!r}")
     if not isinstance(steps, (int, np.integer)) or steps < 0:
         raise InputError(f"steps: expected a non-negative number of Gauss-Newton solves, found {steps!r}")
-    eps = float(eps)
     values = jnp.asarray(values)
     if not jnp.issubdtype(values.dtype, jnp.floating):
         values = values.astype(jnp.result_type(float))
@@ -120,9 +127,14 @@ def fit_log_polynomial(
     u = jnp.asarray(u, values.dtype)
     v = jnp.asarray(v, values.dtype)
     w = jnp.ones(values.shape[-1:], values.dtype) if weights is None else jnp.asarray(weights, values.dtype)
-    w = jnp.broadcast_to(w, values.shape)
-    opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
-            "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
+    return u, v, values, jnp.broadcast_to(w, values.shape), mask, variables, float(eps)
+
+
+def _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, *, eps, steps, floor, start_power):
+    """The log-space start and the ``steps`` Gauss-Newton solves of the module docs, each a
+    :func:`polyjax.fit_polynomial` call with ``opts``; every step keeps the best of :data:`STEP_LENGTHS` and no
+    step by the L2 of equation (11)."""
+    from ._fit import fit_polynomial
 
     keep = fit_weights(u, v, w, mask, cutoff_deg)[0] > 0  # the fitted samples; the model may overflow elsewhere
 
@@ -139,7 +151,7 @@ def fit_log_polynomial(
     fl2 = (floor * rms) ** 2  # weight floor: keeps the log-space polynomial tame where the data is dark
     model = _as_log(solve(jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power)), eps)
     l2 = score(model)
-    for _ in range(int(steps)):
+    for _ in range(steps):
         f = model(u, v)
         g = jnp.maximum(f + eps, jnp.finfo(values.dtype).tiny)  # = exp(P) where P is finite
         step = _as_log(solve(jnp.log(g) + (values - f) / g, w * jnp.maximum(g * g, fl2)), eps)

@@ -54,42 +54,10 @@ def tabulate(
         of neither layout.
     """
     if grid is not None:
-        if u is not None or v is not None:
-            raise InputError("grid, u, v: expected either grid= or u= and v=, found both")
-        if str(grid).lower() not in GRIDS:
-            raise InputError(f"grid: expected one of {list(GRIDS)} (or u= and v=), found {grid!r}")
-        if weights is not None:
-            raise InputError("weights: the MERL grid has its own solid-angle weights; pass u=, v= to give weights")
-        gu, gv, gw, above = merl_grid(MERL_RESOLUTION)
-        keep = _choose_bins(above, subsample, int(seed), "tabulate")
-        dtype = jnp.result_type(float)
-        u, v, w = (jnp.asarray(a[keep], dtype) for a in (gu, gv, gw))
-        where = f"the MERL grid, {u.shape[0]} bins" + (f" (subsample {subsample}, seed {seed})" if subsample else "")
+        u, v, w, where = _grid_directions(grid, u, v, weights, subsample, seed)
     else:
-        if u is None or v is None:
-            raise InputError("u and v: expected both (n, 3) direction arrays, or grid='merl'")
-        u, v = jnp.asarray(u), jnp.asarray(v)
-        if not jnp.issubdtype(u.dtype, jnp.floating):
-            u, v = u.astype(jnp.result_type(float)), v.astype(jnp.result_type(float))
-        if u.ndim != 2 or u.shape[-1] != 3 or u.shape != v.shape:
-            raise InputError(f"u and v: expected two (n, 3) arrays of the same shape, found {u.shape} and {v.shape}")
-        u, _ = safe_normalize(u)
-        v, _ = safe_normalize(v)
-        n = u.shape[0]
-        w = jnp.ones(n, u.dtype) if weights is None else jnp.asarray(weights, u.dtype)
-        if w.shape[-1:] != (n,):
-            raise InputError(f"weights: expected shape (..., {n}), found {w.shape}")
-        where = f"{n} given direction pairs"
-    n = u.shape[0]
-    out = jnp.asarray(brdf(u, v))
-    samples_first = False
-    if out.ndim >= 1 and out.shape[-1] == n:
-        values = out
-    elif out.ndim == 2 and out.shape[0] == n:
-        values, samples_first = out.T, True
-    else:
-        raise InputError(f"brdf {type(brdf).__name__}: expected an output of shape (..., {n}) or ({n}, C) for {n} "
-                         f"direction pairs, found {out.shape}")
+        u, v, w, where = _given_directions(u, v, weights)
+    values, samples_first = _samples_last(brdf, u, v)
     if not jnp.issubdtype(values.dtype, jnp.floating):
         values = values.astype(u.dtype)
     finite = jnp.isfinite(values)
@@ -102,3 +70,49 @@ def tabulate(
         u=u, v=v, values=values, weights=w, mask=finite, names=tuple(names), channels=tuple(channels),
         axes=tuple(axes), source=source or f"{type(brdf).__name__} tabulated on {where}",
     )
+
+
+def _grid_directions(grid, u, v, weights, subsample, seed):
+    """``(u, v, weights, description)`` of the MERL grid's bins above the horizon (or a ``subsample`` of them)."""
+    if u is not None or v is not None:
+        raise InputError("grid, u, v: expected either grid= or u= and v=, found both")
+    if str(grid).lower() not in GRIDS:
+        raise InputError(f"grid: expected one of {list(GRIDS)} (or u= and v=), found {grid!r}")
+    if weights is not None:
+        raise InputError("weights: the MERL grid has its own solid-angle weights; pass u=, v= to give weights")
+    gu, gv, gw, above = merl_grid(MERL_RESOLUTION)
+    keep = _choose_bins(above, subsample, int(seed), "tabulate")
+    dtype = jnp.result_type(float)
+    u, v, w = (jnp.asarray(a[keep], dtype) for a in (gu, gv, gw))
+    where = f"the MERL grid, {u.shape[0]} bins" + (f" (subsample {subsample}, seed {seed})" if subsample else "")
+    return u, v, w, where
+
+
+def _given_directions(u, v, weights):
+    """``(u, v, weights, description)`` of given ``(n, 3)`` directions, renormalised; weights default to 1."""
+    if u is None or v is None:
+        raise InputError("u and v: expected both (n, 3) direction arrays, or grid='merl'")
+    u, v = jnp.asarray(u), jnp.asarray(v)
+    if not jnp.issubdtype(u.dtype, jnp.floating):
+        u, v = u.astype(jnp.result_type(float)), v.astype(jnp.result_type(float))
+    if u.ndim != 2 or u.shape[-1] != 3 or u.shape != v.shape:
+        raise InputError(f"u and v: expected two (n, 3) arrays of the same shape, found {u.shape} and {v.shape}")
+    u, _ = safe_normalize(u)
+    v, _ = safe_normalize(v)
+    n = u.shape[0]
+    w = jnp.ones(n, u.dtype) if weights is None else jnp.asarray(weights, u.dtype)
+    if w.shape[-1:] != (n,):
+        raise InputError(f"weights: expected shape (..., {n}), found {w.shape}")
+    return u, v, w, f"{n} given direction pairs"
+
+
+def _samples_last(brdf, u, v):
+    """``brdf(u, v)`` as ``(*batch, n)`` values and whether it came samples-first (``(n, C)``, transposed)."""
+    n = u.shape[0]
+    out = jnp.asarray(brdf(u, v))
+    if out.ndim >= 1 and out.shape[-1] == n:
+        return out, False
+    if out.ndim == 2 and out.shape[0] == n:
+        return out.T, True
+    raise InputError(f"brdf {type(brdf).__name__}: expected an output of shape (..., {n}) or ({n}, C) for {n} "
+                     f"direction pairs, found {out.shape}")

@@ -85,9 +85,8 @@ def run_render(args) -> int:
 
     from .._cli import _parse_degrees
     from .._config import configured_data_root
-    from .._errors import InputError
     from .._outputs import check_output_file
-    from . import Camera, Scene, Sphere, SwapUV, comparison_figure, mosaic, render_grid, rgb_brdf, write_exr, write_png
+    from . import Camera, Scene, Sphere, SwapUV, mosaic, render_grid, write_exr, write_png
 
     root = getattr(args, "data_root", None)
     out = Path(args.out)
@@ -99,45 +98,7 @@ def run_render(args) -> int:
     vals = np.asarray(m.values)
     n_mat = int(np.prod(vals.shape[: vals.ndim - (2 if has_channels else 1)], dtype=int))
     names = list(m.names) if m.names else [spec]
-
-    def lanes(model):
-        """One RGB BRDF per material of a model with batch shape (materials..., [channels])."""
-        import jax
-
-        nb = len(model.batch_shape) - (1 if has_channels else 0)
-        n_model = int(np.prod(model.batch_shape[:max(nb, 0)], dtype=int))
-        if n_model != n_mat:
-            raise InputError(
-                f"--model {args.model!r}: holds {n_model} material(s) (batch shape {model.batch_shape}), but the "
-                f"dataset {spec!r} has {n_mat}; pass the --dataset the model was fitted to"
-            )
-        if nb <= 0:
-            return [rgb_brdf(model)]
-        flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), model)
-        return [rgb_brdf(jax.tree.map(lambda a, k=k: a[k], flat)) for k in range(n_mat)]
-
-    saved = None
-    if args.model and args.model.strip().lower() != "polynomial":
-        from .._kinds import fitter_for
-
-        is_file = Path(args.model).suffix in (".npz", ".json") or Path(args.model).exists()
-        if is_file:
-            saved = lanes(pj.load_model(args.model))
-        else:
-            kind, model_name = fitter_for(args.model)
-            saved = lanes(kind.fit(model_name, m))
-    rows, row_names = [], []
-    if args.reference:
-        rows.append([_reference(spec, m, k, root) for k in range(n_mat)])
-        row_names.append("measured")
-    if saved is not None:
-        rows.append(saved)
-        row_names.append(Path(args.model).stem if is_file else model_name)
-    else:
-        for p in degrees:
-            model = pj.fit_polynomial(m, variables=args.variables, degree=p)
-            rows.append(lanes(model))
-            row_names.append(f"p={p}")
+    rows, row_names = _rows(args, m, spec, root, degrees, n_mat, has_channels)
     if args.swap_uv:
         rows = [[SwapUV(b) for b in row] for row in rows]
     cam = Camera(eye=(0.0, 0.0, 5.0), width=args.size, height=args.size, ortho_height=2.1)
@@ -150,14 +111,73 @@ def run_render(args) -> int:
     print(f"rows: {', '.join(row_names)}; columns: {', '.join(names[:n_mat])}")
     print(f"effects: {', '.join(grid.effects.names())}; wrote {out.with_suffix('.exr')} and {out.with_suffix('.png')}")
     if args.reference and len(rows) > 1:
-        hit = np.asarray(grid.hit)
-        for k in range(n_mat):
-            fig = out.parent / f"{out.name}_{k}_compare.png"
-            scores = comparison_figure(fig, images[0, k], list(images[1:, k]), row_names[1:],
-                                       exposure=args.exposure, mask=hit)
-            print(f"{names[k] if k < len(names) else k}: PSNR vs measured " +
-                  ", ".join(f"{n} {s:.2f} dB" for n, s in scores.items()) + f"  ({fig})")
+        _compare(out, images, np.asarray(grid.hit), row_names, names, n_mat, args.exposure)
     return 0
+
+
+def _rows(args, m, spec: str, root, degrees, n_mat: int, has_channels: bool):
+    """The grid's rows (one RGB BRDF per material each) and their names: the measured reference with
+    ``--reference``, then the ``--model`` (a saved file or a baseline fitted to ``m``) or one polynomial fit per
+    degree."""
+    import polyjax as pj
+
+    from .._kinds import fitter_for
+
+    saved = None  # the --model row, made first: a model that does not match the dataset fails before any work
+    if args.model and args.model.strip().lower() != "polynomial":
+        is_file = Path(args.model).suffix in (".npz", ".json") or Path(args.model).exists()
+        if is_file:
+            model, row_name = pj.load_model(args.model), Path(args.model).stem
+        else:
+            kind, model_name = fitter_for(args.model)
+            model, row_name = kind.fit(model_name, m), model_name
+        saved = _lanes(model, n_mat, has_channels, args.model, spec)
+    rows, row_names = [], []
+    if args.reference:
+        rows.append([_reference(spec, m, k, root) for k in range(n_mat)])
+        row_names.append("measured")
+    if saved is not None:
+        rows.append(saved)
+        row_names.append(row_name)
+    else:
+        for p in degrees:
+            model = pj.fit_polynomial(m, variables=args.variables, degree=p)
+            rows.append(_lanes(model, n_mat, has_channels, args.model, spec))
+            row_names.append(f"p={p}")
+    return rows, row_names
+
+
+def _lanes(model, n_mat: int, has_channels: bool, model_arg, spec: str):
+    """One RGB BRDF per material of a model with batch shape (materials..., [channels])."""
+    import jax
+    import numpy as np
+
+    from .._errors import InputError
+    from . import rgb_brdf
+
+    nb = len(model.batch_shape) - (1 if has_channels else 0)
+    n_model = int(np.prod(model.batch_shape[:max(nb, 0)], dtype=int))
+    if n_model != n_mat:
+        raise InputError(
+            f"--model {model_arg!r}: holds {n_model} material(s) (batch shape {model.batch_shape}), but the "
+            f"dataset {spec!r} has {n_mat}; pass the --dataset the model was fitted to"
+        )
+    if nb <= 0:
+        return [rgb_brdf(model)]
+    flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), model)
+    return [rgb_brdf(jax.tree.map(lambda a, k=k: a[k], flat)) for k in range(n_mat)]
+
+
+def _compare(out: Path, images, hit, row_names, names, n_mat: int, exposure: float) -> None:
+    """One comparison figure per material (``<out>_<k>_compare.png``), the measured row against the others, with
+    their PSNR printed."""
+    from . import comparison_figure
+
+    for k in range(n_mat):
+        fig = out.parent / f"{out.name}_{k}_compare.png"
+        scores = comparison_figure(fig, images[0, k], list(images[1:, k]), row_names[1:], exposure=exposure, mask=hit)
+        print(f"{names[k] if k < len(names) else k}: PSNR vs measured " +
+              ", ".join(f"{n} {s:.2f} dB" for n, s in scores.items()) + f"  ({fig})")
 
 
 __all__ = ["add_render_parser", "run_render"]

@@ -199,6 +199,32 @@ def _term(brdf, ul, vl, weight):
     return _fence(brdf(ul, vl) * weight)
 
 
+def _light_at(light, p, n):
+    """A point or directional light seen from points ``p (N, 3)`` with normals ``n``: the world direction ``l`` to
+    it, its distance (``inf`` for a directional light), ``cos+ theta_l`` and the RGB weight ``E cos+ theta_l``
+    (``I cos+ theta_l / d^2`` for a point light) of its term ``f(u, v) * weight``."""
+    if isinstance(light, DirectionalLight):
+        l = jnp.broadcast_to(light.direction, p.shape)
+        dist = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
+        cos = jnp.maximum(_dot(n, l), 0.0)
+        return l, dist, cos, light.irradiance * cos[..., None]
+    delta = light.position - p
+    d2 = _dot(delta, delta)
+    dist = jnp.sqrt(d2)
+    l = delta / dist[..., None]
+    cos = jnp.maximum(_dot(n, l), 0.0)
+    return l, dist, cos, light.intensity * (cos / d2)[..., None]
+
+
+def _pool_entry(pool, offset, s):
+    """Environment sample ``s`` of the pixels whose pool offset is ``offset``: the pool entry
+    ``(offset + s * stride) mod P`` (direction, ``L / pdf``)."""
+    dirs, lps = pool
+    n_pool = dirs.shape[0]
+    k = ((offset + jnp.uint32(s) * jnp.uint32(_pool_stride(n_pool))) & jnp.uint32(n_pool - 1)).astype(jnp.int32)
+    return dirs[k], lps[k]
+
+
 def _direct(brdf, p, frame, vl, point_lights, pool, salt, pix, n_env, shadow_objects):
     """Direct lighting ``(N, 3)`` at points ``p`` (frame, local view ``vl``).
 
@@ -218,18 +244,7 @@ def _direct(brdf, p, frame, vl, point_lights, pool, salt, pix, n_env, shadow_obj
     n = frame[2]
     acc = jnp.zeros(p.shape, p.dtype)
     for light in point_lights:
-        if isinstance(light, DirectionalLight):
-            l = jnp.broadcast_to(light.direction, p.shape)
-            dist = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
-            cos = jnp.maximum(_dot(n, l), 0.0)
-            weight = light.irradiance * cos[..., None]
-        else:
-            delta = light.position - p
-            d2 = _dot(delta, delta)
-            dist = jnp.sqrt(d2)
-            l = delta / dist[..., None]
-            cos = jnp.maximum(_dot(n, l), 0.0)
-            weight = light.intensity * (cos / d2)[..., None]
+        l, dist, _, weight = _light_at(light, p, n)
         ul, l, weight, dist = _fence((_to_local(frame, l), l, weight, dist))
         c = _term(brdf, ul, vl, weight)
         if shadow_objects is not None:
@@ -244,15 +259,11 @@ def _env_sum(brdf, p, frame, vl, pool, salt, pix, n_env, shadow_objects, occlude
     """Sum over ``n_env`` pooled environment samples of ``f(u, v) L cos / pdf`` (times ``V`` when
     ``shadow_objects`` is given; times ``1 - V`` when ``occluded_only``)."""
     n = frame[2]
-    dirs, lps = pool
-    n_pool = dirs.shape[0]
     inf = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
     offset = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
-    stride = jnp.uint32(_pool_stride(n_pool))
 
     def one(s, a):
-        k = ((offset + jnp.uint32(s) * stride) & jnp.uint32(n_pool - 1)).astype(jnp.int32)
-        l, lp = dirs[k], lps[k]
+        l, lp = _pool_entry(pool, offset, s)
         cos = jnp.maximum(_dot(n, l), 0.0)
         ul, l, weight = _fence((_to_local(frame, l), l, lp * cos[..., None]))
         c = _term(brdf, ul, vl, weight)
@@ -267,6 +278,25 @@ def _env_sum(brdf, p, frame, vl, pool, salt, pix, n_env, shadow_objects, occlude
 
 def _indirect(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounces, effects):
     """Mean over ``spp`` cosine-sampled paths of light arriving after ``1..bounces`` reflections."""
+    return _paths(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounces, effects,
+                  lambda h, fr, v_loc, ix: _cosine_bounce(h, fr, p.dtype))
+
+
+def _cosine_bounce(h, fr, dtype):
+    """A cosine-weighted direction from hash ``h`` in the frame ``fr``: ``(local, world, f cos / pdf factor = pi,
+    None)`` (every direction is valid)."""
+    x0, x1 = _unit(h, dtype), _unit(_hash(h), dtype)
+    r = jnp.sqrt(x0)
+    ph = 2 * jnp.pi * x1
+    loc = jnp.stack([r * jnp.cos(ph), r * jnp.sin(ph), jnp.sqrt(jnp.maximum(1 - x0, 0.0))], -1)
+    return loc, _from_local(fr, loc), jnp.pi, None
+
+
+def _paths(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounces, effects, bounce):
+    """Mean over ``spp`` paths of light arriving after ``1..bounces`` reflections; ``bounce(h, frame, local view,
+    object index)`` draws a bounce direction from hash ``h``: ``(local, world, factor, ok)``, the throughput is
+    multiplied by ``f(local, view) * factor`` (``factor = cos / pdf``) and a path ends where ``ok`` is False
+    (``ok`` None: never)."""
     eps = _eps(p.dtype)
     shadow_objects = objects if effects.shadows else None
     base = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
@@ -275,18 +305,12 @@ def _indirect(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bo
         pos, fr, v_loc, ix = p, frame, vl, idx
         throughput = jnp.ones(p.shape, p.dtype)
         alive = jnp.ones(p.shape[:-1], bool)
-        for bounce in range(bounces):
-            h = _hash(base + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32((bounce * 0x632BE5AB) & 0xFFFFFFFF))
-            x0, x1 = _unit(h, p.dtype), _unit(_hash(h), p.dtype)
-            r = jnp.sqrt(x0)
-            ph = 2 * jnp.pi * x1
-            loc = jnp.stack([r * jnp.cos(ph), r * jnp.sin(ph), jnp.sqrt(jnp.maximum(1 - x0, 0.0))], -1)
-            t_, b_, n_ = fr
-            d = loc[..., :1] * t_ + loc[..., 1:2] * b_ + loc[..., 2:] * n_
-            # cosine-weighted sampling: f cos / pdf = f pi
-            throughput = throughput * _object_brdf(objects, ix)(loc, v_loc) * jnp.pi
-            t2, ix2, hit2 = _intersect(objects, pos + eps * n_, d, eps)
-            alive = alive & hit2
+        for bounce_i in range(bounces):
+            h = _hash(base + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32((bounce_i * 0x632BE5AB) & 0xFFFFFFFF))
+            loc, d, factor, ok = bounce(h, fr, v_loc, ix)
+            throughput = throughput * _object_brdf(objects, ix)(loc, v_loc) * factor
+            t2, ix2, hit2 = _intersect(objects, pos + eps * fr[2], d, eps)
+            alive = alive & hit2 if ok is None else alive & hit2 & ok
             p2 = pos + jnp.where(hit2, t2, 0.0)[..., None] * d
             fr2 = _frame(objects, p2, ix2)
             v2 = _to_local(fr2, -d)
@@ -479,39 +503,21 @@ def _indirect_sampled(objects, p, frame, vl, idx, pix, point_lights, pool, sampl
                       effects):
     """:func:`_indirect` with each bounce direction drawn from the importance sampler of the object it leaves
     (throughput ``*= f cos / pdf``) instead of cosine-weighted; the same estimate in expectation."""
-    eps = _eps(p.dtype)
-    shadow_objects = objects if effects.shadows else None
-    base = _hash(pix ^ _hash(jnp.asarray(salt, jnp.uint32)))
+    return _paths(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounces, effects,
+                  lambda h, fr, v_loc, ix: _sampled_bounce(samplers, h, fr, v_loc, ix, p.dtype))
 
-    def path(s, acc):
-        pos, fr, v_loc, ix = p, frame, vl, idx
-        throughput = jnp.ones(p.shape, p.dtype)
-        alive = jnp.ones(p.shape[:-1], bool)
-        for bounce in range(bounces):
-            h = _hash(base + jnp.uint32(s) * jnp.uint32(0x9E3779B9) + jnp.uint32((bounce * 0x632BE5AB) & 0xFFFFFFFF))
-            hs = [h]
-            for _ in range(4):
-                hs.append(_hash(hs[-1]))
-            xi = jnp.stack([_unit(x, p.dtype) for x in hs], -1)
-            loc, pdf = _sampled_direction(samplers, ix, xi, v_loc)
-            ok = (pdf > 0) & (loc[..., 2] > 0)
-            d = _from_local(fr, loc)
-            weight = jnp.where(ok, loc[..., 2] / jnp.where(ok, pdf, 1.0), 0.0)
-            throughput = throughput * _object_brdf(objects, ix)(loc, v_loc) * weight[..., None]
-            n_ = fr[2]
-            t2, ix2, hit2 = _intersect(objects, pos + eps * n_, d, eps)
-            alive = alive & hit2 & ok
-            p2 = pos + jnp.where(hit2, t2, 0.0)[..., None] * d
-            fr2 = _frame(objects, p2, ix2)
-            v2 = _to_local(fr2, -d)
-            l2 = _direct(_object_brdf(objects, ix2), p2, fr2, v2, point_lights, pool, _hash(h ^ jnp.uint32(7)), pix,
-                         1, shadow_objects)
-            acc = acc + jnp.where(alive[..., None], throughput * l2, 0.0)
-            pos, fr, v_loc, ix = p2, fr2, v2, ix2
-        return acc
 
-    total = jax.lax.fori_loop(0, spp, path, jnp.zeros(p.shape, p.dtype))
-    return total / spp
+def _sampled_bounce(samplers, h, fr, v_loc, ix, dtype):
+    """A direction from the importance sampler of object ``ix`` (five numbers from hash ``h``): ``(local, world,
+    cos / pdf (N, 1), ok)``; ``ok`` is False for a zero density or a direction below the horizon."""
+    hs = [h]
+    for _ in range(4):
+        hs.append(_hash(hs[-1]))
+    xi = jnp.stack([_unit(x, dtype) for x in hs], -1)
+    loc, pdf = _sampled_direction(samplers, ix, xi, v_loc)
+    ok = (pdf > 0) & (loc[..., 2] > 0)
+    weight = jnp.where(ok, loc[..., 2] / jnp.where(ok, pdf, 1.0), 0.0)
+    return loc, _from_local(fr, loc), weight[..., None], ok
 
 
 @eqx.filter_jit

@@ -25,15 +25,16 @@ from ._integrator import (
     _ENV_KEY,
     _dot,
     _hash,
+    _light_at,
+    _pool_entry,
     _pool_size,
-    _pool_stride,
     _primary,
     _radiance_pool,
     _to_local,
     _visible,
     cast_floats,
 )
-from ._scene import DirectionalLight, Scene, plan_effects
+from ._scene import Scene, plan_effects
 
 
 class LightSamples(eqx.Module):
@@ -98,18 +99,7 @@ def _light_samples(scene, pool, target, spp, seed, shadows):
     us, cs, points = [], [], []
     shadowed = jnp.zeros(p.shape[:-1], bool)
     for light in scene.point_lights:
-        if isinstance(light, DirectionalLight):
-            l = jnp.broadcast_to(light.direction, p.shape)
-            dist = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
-            cos = jnp.maximum(_dot(n, l), 0.0)
-            c = light.irradiance * cos[..., None]
-        else:
-            delta = light.position - p
-            d2 = _dot(delta, delta)
-            dist = jnp.sqrt(d2)
-            l = delta / dist[..., None]
-            cos = jnp.maximum(_dot(n, l), 0.0)
-            c = light.intensity * (cos / d2)[..., None]
+        l, dist, cos, c = _light_at(light, p, n)
         if shadow_objects is not None:
             vis = _visible(shadow_objects, p, n, l, dist)
             shadowed = shadowed | ((vis == 0) & (cos > 0))
@@ -118,15 +108,11 @@ def _light_samples(scene, pool, target, spp, seed, shadows):
         cs.append(c)
         points.append(True)
     if pool is not None:
-        dirs, lps = pool
-        n_pool = dirs.shape[0]
         pix = jnp.arange(p.shape[0], dtype=jnp.uint32)
         offset = _hash(pix ^ _hash(jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32) ^ jnp.uint32(_ENV_KEY)))
-        stride = jnp.uint32(_pool_stride(n_pool))
         inf = jnp.full(p.shape[:-1], jnp.inf, p.dtype)
         for s in range(int(spp)):
-            k = ((offset + jnp.uint32(s) * stride) & jnp.uint32(n_pool - 1)).astype(jnp.int32)
-            l, lp = dirs[k], lps[k]
+            l, lp = _pool_entry(pool, offset, s)
             cos = jnp.maximum(_dot(n, l), 0.0)
             c = lp * cos[..., None] / spp
             if shadow_objects is not None:
