@@ -16,7 +16,6 @@ MAX_LINES = 80
 WHY_LONG = "Over 80 lines because"
 
 
-
 def _sources(packages=PACKAGES):
     for package in packages:
         for path in sorted((ROOT / package).rglob("*.py")):
@@ -66,10 +65,8 @@ def _imports_baselines(rel: str, source: str) -> list[str]:
 
 
 def test_no_function_longer_than_80_lines_without_saying_why():
-    offenders = []
-    for rel, source in _sources():
-        offenders += [f"{rel}:{line} {name} ({length} lines)" for name, line, length in long_functions(source)
-]
+    offenders = [f"{rel}:{line} {name} ({length} lines)"
+                 for rel, source in _sources() for name, line, length in long_functions(source)]
     assert offenders == [], (
         f"functions over {MAX_LINES} lines: split them into named steps, or begin the docstring with a first "
         f"paragraph that says '{WHY_LONG} ...': " + "; ".join(offenders))
