@@ -225,8 +225,9 @@ def _unit_directions(u, v):
 
 
 @functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))
-def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
-    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks."""
+def _prepare_core(ok, values, w, m, *, nonfinite, shared):
+    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks (the directions are not
+    passed through: the same arrays go on, so work kept for them, e.g. a streamed fit's geometry, is found again)."""
     n = values.shape[-1]
     y = values.reshape(-1, n)
     nb = y.shape[0]
@@ -246,7 +247,7 @@ def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
         w = jnp.broadcast_to(w, (nb, n))
         m = jnp.broadcast_to(m, (nb, n))
     y = jnp.where(finite, y, 0.0)
-    return u, v, y, w, m, lane_bad, w_bad, any_bad
+    return y, w, m, lane_bad, w_bad, any_bad
 
 
 def prepare_inputs(
@@ -285,8 +286,7 @@ def prepare_inputs(
     # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
     # in every process: most of a warm `polyjax fit`)
     u, v, ok = _unit_directions(u, v)
-    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, ok, values, w, m, nonfinite=nonfinite,
-                                                            shared=shared)
+    y, w, m, lane_bad, w_bad, any_bad = _prepare_core(ok, values, w, m, nonfinite=nonfinite, shared=shared)
     if is_concrete(w_bad) and bool(w_bad):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
     if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):
