@@ -211,3 +211,31 @@ def test_errors_are_polyjax_errors():
 def test_write_rejects_wrong_shape(tmp_path):
     with pytest.raises(pj.InputError, match="values"):
         pj.data.write_merl_binary(tmp_path / "x.binary", np.zeros((3, 10)), resolution=SMALL_RES)
+
+
+def test_loaders_return_one_mask_row_when_every_lane_has_the_same_valid_bins(tmp_path):
+    """Bins missing in every channel (as in MERL's files): the mask is ``(n,)``, and the fit shares one design
+    across the channels; a bin missing in one channel only keeps the mask ``(3, n)``; both fits agree with
+    fits given the same mask explicitly."""
+    vals = smooth_table(SMALL_RES, 0)
+    vals[:, ::7] = -1.0  # missing in every channel
+    pj.data.write_merl_binary(tmp_path / "same.binary", vals, resolution=SMALL_RES, mask=vals >= 0)
+    same = pj.data.load_merl_binary(tmp_path / "same.binary")
+    assert same.mask.shape == (same.n_samples,)
+    assert same.mask.dtype == bool and not bool(np.all(np.asarray(same.mask)))
+    _, _, _, above = pj.data.merl_grid(SMALL_RES)
+    kept = np.flatnonzero(above)
+    np.testing.assert_array_equal(np.asarray(same.mask), (vals[0] >= 0)[kept])
+    fit = pj.fit_polynomial(same, degree=3)
+    explicit = pj.fit_polynomial(same.u, same.v, same.values, degree=3, weights=same.weights,
+                                 mask=np.broadcast_to(np.asarray(same.mask), same.values.shape))
+    np.testing.assert_allclose(fit.l2, explicit.l2, rtol=1e-12)
+    assert np.all(np.asarray(fit.status) == pj.Result.OK)
+
+    vals[1, 3] = -1.0  # one more bin, missing in G only
+    pj.data.write_merl_binary(tmp_path / "differ.binary", vals, resolution=SMALL_RES, mask=vals >= 0)
+    differ = pj.data.load_merl_binary(tmp_path / "differ.binary")
+    assert differ.mask.shape == differ.values.shape == (3, differ.n_samples)
+    assert pj.data.load_merl_binary([tmp_path / "same.binary"] * 2).mask.shape == (same.n_samples,)
+    assert pj.data.load_merl_binary([tmp_path / "same.binary", tmp_path / "differ.binary"]).mask.ndim == 3
+    assert same[1].mask.shape == (same.n_samples,) and differ[1].mask.shape == (differ.n_samples,)

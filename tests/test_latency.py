@@ -127,8 +127,16 @@ def small_stream(monkeypatch):
     fit_mod._fit_kernel.clear_cache()
 
 
+@pytest.mark.parametrize("branch", ["auto", "one pass", "refined"])
 @pytest.mark.parametrize("variables,degree", [("lafortune", [1, 3, 5]), ("ashikhmin-shirley", 4)])
-def test_streamed_fit_equals_dense_fit(small_stream, variables, degree):
+def test_streamed_fit_equals_dense_fit(small_stream, monkeypatch, variables, degree, branch):
+    """Both ways the streamed fit finishes (one pass over the values; a second, refining pass when the design is
+    ill-conditioned or the residual is tiny) give the dense fit's numbers."""
+    if branch == "one pass":
+        monkeypatch.setattr(stream_mod, "SNE_CONDITION", np.inf)
+        monkeypatch.setattr(stream_mod, "CANCELLATION", 0.0)
+    if branch == "refined":
+        monkeypatch.setattr(stream_mod, "SNE_CONDITION", 0.0)
     u, v, values, weights, mask = _tall_problem()
 
     def fit(u, v, values, weights, mask):
@@ -145,6 +153,21 @@ def test_streamed_fit_equals_dense_fit(small_stream, variables, degree):
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(getattr(streamed, field), getattr(dense, field))
     assert np.all(np.asarray(streamed.status) == pj.Result.OK)
+
+
+def test_streamed_fit_of_a_nearly_exact_polynomial_takes_the_refining_pass(small_stream):
+    """Values that the model fits to 1e-5 of their size: ``b^T b - 2 beta^T A^T b + beta^T G beta`` would lose
+    most digits of the residual, so the residual pass computes it; L2 and coefficients equal the dense fit's."""
+    u, v, _, weights, mask = _tall_problem()
+    x = np.asarray(pj.explanatory_variables("lafortune", u, v))
+    rng = np.random.default_rng(3)
+    values = np.stack([0.2 + 0.1 * x[:, 0] - 0.05 * x[:, 1] + 1e-6 * rng.normal(size=len(u)) for _ in range(2)])
+    streamed = pj.fit_polynomial(u, v, values, "lafortune", 3, weights=weights, mask=mask)
+    assert small_stream
+    dense = jax.jit(lambda *a: pj.fit_polynomial(*a, "lafortune", 3, weights=weights, mask=mask))(u, v, values)
+    assert np.all(np.asarray(streamed.l2) < 2e-6)
+    np.testing.assert_allclose(streamed.l2, dense.l2, rtol=1e-8)
+    np.testing.assert_allclose(streamed.coefficients, dense.coefficients, rtol=1e-9, atol=1e-12)
 
 
 def test_streamed_fit_falls_back_on_a_rank_deficient_design(small_stream):
