@@ -77,6 +77,7 @@ def cmd_fit(args) -> int:
 
     import polyjax as pj
 
+    from ._aot import fit_saved
     from ._cache import compile_notice
     from ._kinds import fitter_for, kind_of
     from ._outputs import check_output_file
@@ -89,12 +90,14 @@ def cmd_fit(args) -> int:
         check_output_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
     t0 = time.perf_counter()
-    with compile_notice("the fit", getattr(args, "cache_in_use", None)):
+    cache = getattr(args, "cache_in_use", None)
+    zero = None
+    with compile_notice("the fit", cache):
         if polynomial:
-            model = pj.fit_polynomial(
-                data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
-                cutoff_deg=args.cutoff,
-            )
+            options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
+                           cutoff_deg=args.cutoff)
+            saved = fit_saved(data, cache, **options)  # the compiled fit kept beside the cache (polyjax/_aot.py)
+            model, zero = saved if saved is not None else (pj.fit_polynomial(data, **options), None)
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
         l2 = np.asarray(model.l2)
@@ -115,8 +118,10 @@ def cmd_fit(args) -> int:
     status = [status_names[int(c)] if 0 <= int(c) < len(status_names) else str(int(c))
               for c in np.asarray(model.status).ravel()]
     labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
-    zero = np.asarray(pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=args.cutoff,
-                                  mask=data.mask))
+    if zero is None:
+        zero = pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=args.cutoff,
+                           mask=data.mask)
+    zero = np.asarray(zero)
     zero = np.broadcast_to(zero, l2.shape)
     barely = (zero > 0) & np.isfinite(l2) & (l2 > ZERO_MODEL_RATIO * zero)
     warnings_ = []

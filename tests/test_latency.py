@@ -25,24 +25,32 @@ def _cli(args, env):
 
 
 def test_cli_cache_is_hit_by_a_second_process(tmp_path):
-    """Two fresh processes: the first compiles (says so on stderr) and writes the cache; the second finds every
-    program there (no file added) and prints the same fit."""
+    """Two fresh processes: the first compiles (says so on stderr) and writes the cache and the fit's executable;
+    the second loads that executable (no file added anywhere) and prints the same fit as a process without any
+    cache."""
     env = {k: v for k, v in os.environ.items() if k not in ("POLYJAX_DATA", "POLYJAX_CACHE", "CI")}
     env.update(PYTHONPATH=str(ROOT), POLYJAX_COMPILE_NOTICE_SECS="0")
     folder = tmp_path / "jax-cache"
     args = ["fit", "--degree", "3", "--json", "--cache-dir", str(folder)]
     first = _cli(args, env)
     assert first.returncode == 0, first.stderr
-    written = sorted(p.name for p in folder.iterdir())
-    assert any(name.startswith("jit__fit_kernel") for name in written), written
+    written = sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+    assert any(name.startswith("jit_run") for name in written), written  # the whole fit: one program
+    assert len(list((folder / "polyjax-programs").glob("fit-*.bin"))) == 1, written
     assert "polyjax: compiling the fit" in first.stderr
     second = _cli(args, env)
     assert second.returncode == 0, second.stderr
-    assert sorted(p.name for p in folder.iterdir()) == written  # a compiled (missed) program would add a file
+    assert sorted(str(p.relative_to(folder)) for p in folder.rglob("*")) == written  # nothing compiled again
+    assert "compiling" not in second.stderr
     assert json.loads(second.stdout)["l2"] == json.loads(first.stdout)["l2"]
     off = _cli(["fit", "--degree", "3", "--json", "--no-cache"], dict(env, XDG_CACHE_HOME=str(tmp_path / "xdg")))
     assert off.returncode == 0, off.stderr
     assert not (tmp_path / "xdg").exists()
+    plain, warm = json.loads(off.stdout), json.loads(second.stdout)  # the eager fit of a process without a cache
+    for key in ("l2", "l2_zero_model", "status", "rank"):
+        assert warm[key] == plain[key], key
+    np.testing.assert_allclose(warm["coefficients"], plain["coefficients"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(warm["condition"], plain["condition"], rtol=1e-9)
 
 
 def test_import_leaves_jax_config_alone():
