@@ -4,9 +4,10 @@ Two sources per material: a MERL ``.binary`` file of the real layout (written on
 into a temporary folder) and the neural-BRDF networks evaluated on the MERL grid. The physical floor
 is the time to stream the same 34,992,012 bytes from memory (a ``numpy`` copy of an in-memory buffer),
 measured in the same run. Target: load + fit (``.binary``) at most 15x that floor. The fit of concrete data is
-streamed (``polyjax/_stream.py``: the design is built in row blocks and never held); the dense fit (the path a
-traced, differentiable call takes; here the same call under ``jax.jit``) is timed beside it, and the two L2 must
-agree to 1e-10 (relative).
+streamed (``polyjax/_stream.py``: the design is built in row blocks and never held; what depends on the MERL grid
+alone, CholeskyQR2 of the weighted design, is computed once per process, so a material costs one pass over its
+values, two when the refining pass is needed); the dense fit (the path a traced, differentiable call takes; here
+the same call under ``jax.jit``) is timed beside it, and the two L2 must agree to 1e-10 (relative).
 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_merl.py [n_materials]``
 """

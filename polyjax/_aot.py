@@ -12,6 +12,7 @@ The program takes the inputs traced, so it is the fit a ``jit``-ted call of :fun
 that is the eager call's result too: data below :data:`polyjax._stream.STREAM_ROWS` samples, finite values and
 directions (an eager call raises on NaN where a traced one flags the lane). Anything unexpected (a missing,
 stale or unreadable file, a refused input) falls back to the ordinary call; nothing here is ever an error.
+``POLYJAX_SAVED_PROGRAMS=off`` turns this off (the compilation cache alone then serves a warm run).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import numpy as np
 
 #: subfolder of the compilation cache folder holding the serialised fits
 FOLDER = "polyjax-programs"
+#: environment variable: ``off`` (or ``0``, ``no``, ``false``) keeps no executables
+ENV = "POLYJAX_SAVED_PROGRAMS"
 _FIELDS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used",
            "status")
 _SOURCE_STAMP: list[str] = []
@@ -87,7 +90,7 @@ def fit_saved(data, folder: Path | None, **options):
     with ``options`` (``variables``, ``degree``, ``basis``, ``interactions``, ``cutoff_deg``), from the executable
     kept in ``folder``/:data:`FOLDER` (written there on the first call); None when this path does not apply (then
     the caller fits as usual)."""
-    if folder is None or not _usable(data):
+    if folder is None or os.environ.get(ENV, "").strip().lower() in ("off", "0", "no", "false") or not _usable(data):
         return None
     try:
         from jax.experimental import serialize_executable
