@@ -225,7 +225,28 @@ def _report(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: commands defined in this file: parsing them needs none of the other commands' modules (render, export, svbrdf)
+_CORE_COMMANDS = ("fit", "report")
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command named in ``argv`` (the first positional argument after the global options), if any."""
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in ("--data-root", "--cache-dir"):
+            i += 2
+            continue
+        if a.startswith("-"):
+            i += 1
+            continue
+        return a
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or, for ``command`` in :data:`_CORE_COMMANDS`, of the core commands only (the
+    other commands' modules are then not imported: a shorter start for ``polyjax fit``)."""
     p = argparse.ArgumentParser(prog="polyjax",
                                 description="Fit polynomial (and baseline) BRDF models to measured data.")
     root_help = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
@@ -267,6 +288,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
     f.set_defaults(func=cmd_fit)
+    if command in _CORE_COMMANDS:
+        return p
 
     try:
         from .render._cli import add_render_parser, run_render
@@ -301,7 +324,8 @@ def main(argv: list[str] | None = None) -> int:
     _x64()
     from ._errors import PolyjaxError
 
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = cmd_report

@@ -200,3 +200,18 @@ def test_gradient_of_a_tall_fit_takes_the_dense_path(small_stream):
     fd = (loss(values + eps * direction) - loss(values - eps * direction)) / (2 * eps)  # eager: streamed
     assert small_stream
     np.testing.assert_allclose(float(np.sum(np.asarray(g) * direction)), float(fd), rtol=1e-6)
+
+
+def test_fit_command_parser_leaves_the_other_commands_unimported():
+    from polyjax._cli import _command_of
+
+    assert _command_of(["--data-root", "fit", "--no-cache", "fit", "--degree", "3"]) == "fit"
+    assert _command_of(["--cache-dir=x", "report"]) == "report"
+    assert _command_of(["--help"]) is None
+    code = ("import sys; from polyjax._cli import build_parser, _command_of; "
+            "argv = ['--no-cache', 'fit', '--degree', '3']; a = build_parser(_command_of(argv)).parse_args(argv); "
+            "print(a.degree, [m for m in ('polyjax.render', 'polyjax.svbrdf', 'polyjax.export') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["3", "[]"]
