@@ -239,3 +239,18 @@ def test_loaders_return_one_mask_row_when_every_lane_has_the_same_valid_bins(tmp
     assert pj.data.load_merl_binary([tmp_path / "same.binary"] * 2).mask.shape == (same.n_samples,)
     assert pj.data.load_merl_binary([tmp_path / "same.binary", tmp_path / "differ.binary"]).mask.ndim == 3
     assert same[1].mask.shape == (same.n_samples,) and differ[1].mask.shape == (differ.n_samples,)
+
+
+def test_loads_in_a_row_keep_their_own_values(tmp_path):
+    """Single-file loads read into one reused buffer: what a load returned never changes with the next load."""
+    a = write_small_merl(tmp_path / "a.binary", seed=1)
+    b = write_small_merl(tmp_path / "b.binary", seed=2)
+    first = pj.data.load_merl_binary(tmp_path / "a.binary")
+    kept = np.asarray(first.values).copy()
+    second = pj.data.load_merl_binary(tmp_path / "b.binary")
+    np.testing.assert_array_equal(np.asarray(first.values), kept)
+    _, _, _, above = pj.data.merl_grid(SMALL_RES)
+    for m, t in ((first, a), (second, b)):
+        idx = np.flatnonzero(above & (t >= 0).any(0))
+        ok = t[:, idx] >= 0
+        np.testing.assert_allclose(np.asarray(m.values)[ok], t[:, idx][ok], rtol=1e-14)

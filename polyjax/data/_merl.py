@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from pathlib import Path
 from typing import Sequence
 
@@ -242,17 +243,40 @@ def read_merl_binary(
         NonFiniteValueError.
     """
     del copy
+    raw, res = _read_raw(path, None)
+    if scaled:
+        raw *= np.asarray(MERL_SCALE)[:, None]
+    return raw, res
+
+
+def _read_raw(path, scratch: dict | None) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """The checked ``(3, N)`` stored numbers of a ``.binary`` file: a fresh array, or, with ``scratch`` (a dict
+    holding a reusable buffer, see :data:`_SCRATCH`), read into that buffer (no fresh pages to fault in)."""
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"MERL .binary file {str(path)!r}: no such file")
-    with open(path, "rb") as f:
+    with open(path, "rb", buffering=0) as f:
         size = os.fstat(f.fileno()).st_size
         head = f.read(256)
         res, n = _check_header(path, head, size)
         f.seek(_HEADER_BYTES)
-        raw = np.fromfile(f, dtype="<f8", count=3 * n)
-    if raw.size != 3 * n:  # the file shrank while being read
-        raise TruncatedFileError(path, f"{3 * n} float64 values", f"{raw.size}")
+        if scratch is None:
+            raw = np.fromfile(f, dtype="<f8", count=3 * n)
+            got = raw.size
+        else:
+            if scratch.get("buffer") is None or scratch["buffer"].size != 3 * n:
+                scratch["buffer"] = np.empty(3 * n, "<f8")
+            raw = scratch["buffer"]
+            view = memoryview(raw).cast("B")
+            got = 0
+            while got < view.nbytes:  # readinto may return less than asked for
+                k = f.readinto(view[got:])
+                if not k:
+                    break
+                got += k
+            got //= 8
+    if got != 3 * n:  # the file shrank while being read
+        raise TruncatedFileError(path, f"{3 * n} float64 values", f"{got}")
     raw = raw.reshape(3, n)
     if not np.isfinite(np.sum(raw)):  # a finite sum means every entry is finite; else find the culprits
         finite = np.isfinite(raw)
@@ -262,9 +286,13 @@ def read_merl_binary(
                 path, "finite numbers (negative = missing)",
                 f"{int((~finite).sum())} NaN/inf values (first: channel {'RGB'[c]}, bin {idx}: {raw[c, idx]})",
             )
-    if scaled:
-        raw *= np.asarray(MERL_SCALE)[:, None]
     return raw, res
+
+
+#: the buffer a single-file :func:`load_merl_binary` reads into (the file's numbers are only gathered from, so
+#: one 35 MB buffer serves every load of a process instead of fresh memory each time), with its lock
+_SCRATCH: dict = {}
+_SCRATCH_LOCK = threading.Lock()
 
 
 def _check_header(path: Path, head: bytes, size: int) -> tuple[tuple[int, int, int], int]:
@@ -465,20 +493,23 @@ def load_merl_binary(
     plist = [Path(paths)] if single else [Path(p) for p in paths]
     if not plist:
         raise InputError("paths: expected at least one MERL .binary file")
+    names = tuple(names) if names is not None else tuple(p.stem for p in plist)
+    if len(names) != len(plist):
+        raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
+    source = (f"MERL .binary {', '.join(p.name for p in plist)}"
+              + (f" (subsample {subsample}, seed {seed})" if subsample else ""))
+    if len(plist) == 1:  # read into the reused buffer, gathered from before the lock is released
+        with _SCRATCH_LOCK:
+            raw, res = _read_raw(plist[0], _SCRATCH)
+            return _merl_measurements(raw[None], res, subsample=subsample, seed=seed, names=names,
+                                      scale=MERL_SCALE, source=source)
     tables = []
     res = None
     for p in plist:
-        vals, r = read_merl_binary(p, scaled=False)
+        vals, r = _read_raw(p, None)
         if res is not None and r != res:
             raise HeaderError(p, f"the resolution {res} of {plist[0]}", f"{r}")
         res = r
         tables.append(vals)
-    values = tables[0][None] if len(tables) == 1 else np.stack(tables)  # one file: no copy before the gather
-    names = tuple(names) if names is not None else tuple(p.stem for p in plist)
-    if len(names) != len(plist):
-        raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
-    return _merl_measurements(
-        values, res, subsample=subsample, seed=seed, names=names, scale=MERL_SCALE,
-        source=f"MERL .binary {', '.join(p.name for p in plist)}"
-        + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
-    )
+    return _merl_measurements(np.stack(tables), res, subsample=subsample, seed=seed, names=names, scale=MERL_SCALE,
+                              source=source)
