@@ -95,7 +95,8 @@ def fit_nonlinear(d, dfit, names, chunk, out, times):
         preds, ts, steps_hit = [], [], 0
         for s in range(0, len(names), chunk):
             sub = pj.Measurements(u=dfit.u, v=dfit.v, values=dfit.values[s:s + chunk], weights=dfit.weights,
-                                  mask=dfit.mask[s:s + chunk], names=dfit.names[s:s + chunk], channels=dfit.channels,
+                                  mask=dfit.mask if dfit.mask.ndim == 1 else dfit.mask[s:s + chunk],
+                                  names=dfit.names[s:s + chunk], channels=dfit.channels,
                                   axes=dfit.axes, source=dfit.source)
             t = time.perf_counter()
             f = bl.fit(name, sub, n_starts=16, key=key)

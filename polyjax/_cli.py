@@ -88,10 +88,10 @@ def cmd_fit(args) -> int:
     if args.save:
         check_output_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
-    model, l2, elapsed = _run_fit(args, data, kind, model_name, degree)
+    model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, degree)
     if args.save:
         pj.save_model(args.save, model)
-    out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, elapsed)
+    out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed)
     if args.json:
         print(json.dumps(out))
         return 0
@@ -102,27 +102,32 @@ def cmd_fit(args) -> int:
 
 
 def _run_fit(args, data, kind, model_name, degree):
-    """The fit of ``polyjax fit`` (``kind`` None: the polynomial) -> ``(model, l2 array, seconds)``."""
+    """The fit of ``polyjax fit`` (``kind`` None: the polynomial) -> ``(model, l2 array, zero-model L2 or None,
+    seconds)``. A polynomial fit runs from the executable saved beside the cache when there is one
+    (``polyjax/_aot.py``, which also returns the L2 of ``f = 0``), else through :func:`polyjax.fit_polynomial`."""
     import numpy as np
 
     import polyjax as pj
 
+    from ._aot import fit_saved
     from ._cache import compile_notice
 
     t0 = time.perf_counter()
-    with compile_notice("the fit", getattr(args, "cache_in_use", None)):
+    cache = getattr(args, "cache_in_use", None)
+    zero = None
+    with compile_notice("the fit", cache):
         if kind is None:
-            model = pj.fit_polynomial(
-                data, variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
-                cutoff_deg=args.cutoff,
-            )
+            options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
+                           cutoff_deg=args.cutoff)
+            saved = fit_saved(data, cache, **options)
+            model, zero = saved if saved is not None else (pj.fit_polynomial(data, **options), None)
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
         l2 = np.asarray(model.l2)
-    return model, l2, time.perf_counter() - t0
+    return model, l2, zero, time.perf_counter() - t0
 
 
-def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, elapsed):
+def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed):
     """The JSON record of ``polyjax fit`` and the coefficients (or parameters) as one array."""
     import numpy as np
 
@@ -143,7 +148,7 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, e
     status = [status_names[int(c)] if 0 <= int(c) < len(status_names) else str(int(c))
               for c in np.asarray(model.status).ravel()]
     labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
-    zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff)
+    zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff, zero)
     out = {
         "source": data.source,
         "synthetic": synthetic,
@@ -168,15 +173,16 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, e
     return out, beta
 
 
-def _zero_model_check(data, l2, labels, cutoff):
-    """The L2 of ``f = 0`` per lane (the shape of ``l2``) and a warning naming the lanes whose fit barely beats it
-    (L2 above :data:`ZERO_MODEL_RATIO` of it), or no warning."""
+def _zero_model_check(data, l2, labels, cutoff, zero=None):
+    """The L2 of ``f = 0`` per lane (the shape of ``l2``; computed unless given) and a warning naming the lanes
+    whose fit barely beats it (L2 above :data:`ZERO_MODEL_RATIO` of it), or no warning."""
     import numpy as np
 
     import polyjax as pj
 
-    zero = np.asarray(pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=cutoff,
-                                  mask=data.mask))
+    if zero is None:
+        zero = pj.l2_error(data.values, 0.0, data.u, data.v, weights=data.weights, cutoff_deg=cutoff, mask=data.mask)
+    zero = np.asarray(zero)
     zero = np.broadcast_to(zero, l2.shape)
     barely = (zero > 0) & np.isfinite(l2) & (l2 > ZERO_MODEL_RATIO * zero)
     warnings_ = []
@@ -262,7 +268,28 @@ def _report(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: commands defined in this file: parsing them needs none of the other commands' modules (render, export, svbrdf)
+_CORE_COMMANDS = ("fit", "report")
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command named in ``argv`` (the first positional argument after the global options), if any."""
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in ("--data-root", "--cache-dir"):
+            i += 2
+            continue
+        if a.startswith("-"):
+            i += 1
+            continue
+        return a
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or, for ``command`` in :data:`_CORE_COMMANDS`, of the core commands only (the
+    other commands' modules are then not imported: a shorter start for ``polyjax fit``)."""
     p = argparse.ArgumentParser(prog="polyjax",
                                 description="Fit polynomial (and baseline) BRDF models to measured data.")
     root_help = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
@@ -304,6 +331,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
     f.set_defaults(func=cmd_fit)
+    if command in _CORE_COMMANDS:
+        return p
 
     try:
         from .render._cli import add_render_parser, run_render
@@ -338,7 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     _x64()
     from ._errors import PolyjaxError
 
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = cmd_report

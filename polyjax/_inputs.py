@@ -18,9 +18,9 @@ Rules, the same for every fitter and with the same messages:
   raised (under ``jit``), flags the lane (:attr:`PreparedInputs.lane_bad`, reported as ``NONFINITE``);
   ``nonfinite="mask"`` drops those samples.
 * One set of samples for every lane (the shared-design path, one factorisation for all lanes) is chosen from the
-  shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``. The one exception is the
-  mask of a :class:`polyjax.Measurements` built by a loader, ``(*batch, n)`` today: when concrete and equal on
-  every lane it is taken as its ``(n,)`` row (the loaders should return ``(n,)`` masks; then this goes).
+  shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``. The loaders return
+  ``(n,)`` masks whenever every lane has the same valid samples, so their data take that path without any
+  inspection of the mask.
 
 Decisions use shapes and dtypes only; value checks (NaN, negative weights) run only on concrete arrays, so traced
 inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the host.
@@ -114,21 +114,10 @@ def unpack(caller: str, u, v, values, weights, mask):
             raise InputError(f"{caller}(measurements, ...): pass the other arguments by keyword")
         u, v, values = data.u, data.v, data.values
         weights = data.weights if weights is None else weights
-        mask = _loader_mask(data.mask) if mask is None else mask
+        mask = data.mask if mask is None else mask
     if v is None or values is None:
         raise InputError(f"{caller}: expected u, v and values (or a polyjax.Measurements)")
     return u, v, values, weights, mask
-
-
-def _loader_mask(mask):
-    """A :class:`polyjax.Measurements` mask as the loaders build it, ``(*batch, n)``: when it is concrete and the
-    same on every lane (CUReT, Cornell, MERL: the valid samples are a property of the geometry), its ``(n,)`` row,
-    so the fit takes the shared-design path. The loaders' data are concrete; a traced mask is kept per lane.
-    """
-    if mask is None or jnp.ndim(mask) < 2 or not is_concrete(mask):
-        return mask
-    flat = np.asarray(mask).reshape(-1, np.shape(mask)[-1])
-    return flat[0] if bool(np.all(flat == flat[:1])) else mask
 
 
 def fit_dtype(values) -> jnp.dtype:
@@ -211,9 +200,8 @@ def _unit_directions(u, v):
     directions are then normalised once, not once per fit."""
     if not is_concrete(u, v):
         return _normalize_pair(u, v)
-    hit = _UNIT_MEMO.get("pair")
-    if hit is not None and hit[0]() is u and hit[1]() is v:
-        return hit[2]
+    if _known_pair(u, v):
+        return _UNIT_MEMO["pair"][2]
     out = _normalize_pair(u, v)
     if not is_concrete(out):  # concrete arrays closed over inside a trace give traced results: never kept
         return out
@@ -224,9 +212,16 @@ def _unit_directions(u, v):
     return out
 
 
+def _known_pair(u, v) -> bool:
+    """Whether ``u``, ``v`` are the pair :func:`_unit_directions` remembers (already checked and normalised)."""
+    hit = _UNIT_MEMO.get("pair")
+    return hit is not None and hit[0]() is u and hit[1]() is v
+
+
 @functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))
-def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
-    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks."""
+def _prepare_core(ok, values, w, m, *, nonfinite, shared):
+    """The array work of :func:`prepare_inputs`: masks and flags for the concrete checks (the directions are not
+    passed through: the same arrays go on, so work kept for them, e.g. a streamed fit's geometry, is found again)."""
     n = values.shape[-1]
     y = values.reshape(-1, n)
     nb = y.shape[0]
@@ -245,8 +240,13 @@ def _prepare_core(u, v, ok, values, w, m, *, nonfinite, shared):
     if not shared:
         w = jnp.broadcast_to(w, (nb, n))
         m = jnp.broadcast_to(m, (nb, n))
-    y = jnp.where(finite, y, 0.0)
-    return u, v, y, w, m, lane_bad, w_bad, any_bad
+    return w, m, lane_bad, w_bad, any_bad, jnp.all(finite)
+
+
+@jax.jit
+def _finite_values(values):
+    y = values.reshape(-1, values.shape[-1])
+    return jnp.where(jnp.isfinite(y), y, 0.0)
 
 
 def prepare_inputs(
@@ -269,7 +269,7 @@ def prepare_inputs(
     values = jnp.asarray(values, dtype)
     u = jnp.asarray(u, dtype)
     v = jnp.asarray(v, dtype)
-    n = _check_directions(u, v, is_concrete(u, v), lane_directions)
+    n = _check_directions(u, v, is_concrete(u, v) and not _known_pair(u, v), lane_directions)
     if values.ndim < 1 or values.shape[-1] != n:
         raise InputError(f"values: expected shape (..., {n}) with samples last (n = len(u)), found {values.shape}")
     if n == 0 or values.size == 0:
@@ -285,8 +285,10 @@ def prepare_inputs(
     # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
     # in every process: most of a warm `polyjax fit`)
     u, v, ok = _unit_directions(u, v)
-    u, v, y, w, m, lane_bad, w_bad, any_bad = _prepare_core(u, v, ok, values, w, m, nonfinite=nonfinite,
-                                                            shared=shared)
+    w, m, lane_bad, w_bad, any_bad, all_finite = _prepare_core(ok, values, w, m, nonfinite=nonfinite, shared=shared)
+    # the values go on as they are when they are all finite (no copy of a million-sample table), else with 0 for
+    # NaN/inf (masked or flagged)
+    y = values.reshape(nb, n) if _holds(all_finite) else _finite_values(values)
     if is_concrete(w_bad) and bool(w_bad):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
     if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):

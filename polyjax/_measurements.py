@@ -22,7 +22,8 @@ class Measurements(eqx.Module):
             materials and/or colour channels (see ``axes``).
         weights: solid-angle weights ``w_i`` of equation (11), shape ``(n,)`` or ``(*batch, n)``
             (1 where the data gives none).
-        mask: ``(*batch, n)`` True where a measurement is valid (e.g. MERL's negative entries are False).
+        mask: True where a measurement is valid (e.g. MERL's negative entries are False): ``(n,)`` when every
+            lane has the same valid samples (what the loaders return then), else ``(*batch, n)``.
         names: material (or sample) names: one per entry of the first batch axis when that axis is
             materials, or the one material's name when there is no material axis (e.g. a single file
             loaded by path: ``values (3, n)``, ``axes=("channel",)``, ``names=("<file stem>",)``).
@@ -36,7 +37,7 @@ class Measurements(eqx.Module):
     v: Float[Array, "n 3"]
     values: Float[Array, "*batch n"]
     weights: Float[Array, "*wbatch n"]
-    mask: Bool[Array, "*batch n"]
+    mask: Bool[Array, "*mbatch n"]
     names: tuple[str, ...] = eqx.field(static=True, default=())
     ids: tuple[int, ...] = eqx.field(static=True, default=())
     channels: tuple[str, ...] = eqx.field(static=True, default=())
@@ -58,9 +59,11 @@ class Measurements(eqx.Module):
             raise InputError("Measurements has no batch axis to index")
         idx = np.arange(self.batch_shape[0])[index]
         scalar = np.ndim(idx) == 0
-        w = self.weights
+        w, mask = self.weights, self.mask
         if w.ndim == self.values.ndim:
             w = w[idx]
+        if mask.ndim == self.values.ndim:
+            mask = mask[idx]
         names = self.names
         ids = self.ids
         per_entry = len(names) == self.batch_shape[0] and not (self.axes and self.axes[0] == "channel")
@@ -70,7 +73,7 @@ class Measurements(eqx.Module):
             ids = (ids[int(idx)],) if scalar else tuple(ids[int(i)] for i in idx)
         axes = self.axes[1:] if scalar else self.axes
         return Measurements(
-            u=self.u, v=self.v, values=self.values[idx], weights=w, mask=self.mask[idx],
+            u=self.u, v=self.v, values=self.values[idx], weights=w, mask=mask,
             names=names, ids=ids, channels=self.channels, axes=axes, source=self.source,
         )
 
@@ -84,7 +87,7 @@ class Measurements(eqx.Module):
         return self[np.asarray(index)]
 
     def valid_fraction(self) -> float:
-        return float(jnp.mean(self.mask))
+        return float(jnp.mean(jnp.broadcast_to(self.mask, self.values.shape)))
 
 
 def check_samples(u, v, values, *, concrete: bool = True) -> int:
@@ -109,6 +112,14 @@ def check_samples(u, v, values, *, concrete: bool = True) -> int:
     return n
 
 
+def lane_mask(valid: np.ndarray) -> np.ndarray:
+    """A loader's mask from ``valid (*batch, n)``: its ``(n,)`` row when every lane (material, channel) has the
+    same valid samples (the usual case; a fit then shares one design across the lanes), else a copy of ``valid``."""
+    valid = np.asarray(valid, dtype=bool)
+    flat = valid.reshape(-1, valid.shape[-1])
+    return flat[0].copy() if bool(np.all(flat == flat[:1])) else valid.copy()
+
+
 def make_measurements(
     u, v, values, *, weights=None, mask=None, names=(), ids=(), channels=(), axes=(), source="",
     dtype=None,
@@ -119,7 +130,8 @@ def make_measurements(
         u, v: ``(n, 3)`` directions (renormalised here).
         values: ``(*batch, n)``.
         weights: ``(n,)`` or ``(*batch, n)``; defaults to ones.
-        mask: ``(*batch, n)`` bool; defaults to ``isfinite(values)``.
+        mask: ``(n,)`` or ``(*batch, n)`` bool; defaults to ``isfinite(values)``. Stored as ``(n,)`` when every
+            lane has the same valid samples, else ``(*batch, n)``.
     """
     u = np.asarray(u, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
@@ -130,7 +142,7 @@ def make_measurements(
             raise InputError(f"{name}: expected non-zero direction vectors, found a zero vector")
     finite = np.isfinite(values)
     m = finite if mask is None else (np.asarray(mask, dtype=bool) & finite)
-    m = np.broadcast_to(m, values.shape).copy()
+    m = lane_mask(np.broadcast_to(m, values.shape))
     if weights is None:
         weights = np.ones(n)
     weights = np.asarray(weights, dtype=np.float64)

@@ -3,24 +3,33 @@ r"""Streamed fits of tall data (a MERL material: a million samples): the design 
 The dense fit builds the ``n x m`` design ``D``, weights it, and factorises it by CholeskyQR2
 (:func:`polyjax._linalg.tall_qr`). For a million rows that design, and the ``Q_1`` of CholeskyQR2, are each
 ``8 n m`` bytes written and read again several times. Here every pass rebuilds the rows it needs, a block of
-:data:`BLOCK` rows at a time inside one compiled loop, from the scaled principal components ``t (n, k)``
-(``k <= 3`` numbers per sample), and keeps only ``m x m`` sums:
+:data:`BLOCK` rows at a time inside one compiled loop, from the scaled principal components ``t``
+(``k <= 3`` numbers per sample, held as ``(k, n)``: every column of a block is a contiguous, vectorised run),
+and keeps only ``m x m`` (or ``m x r``) sums. With ``A = W^{1/2} D``
+(``W = diag(w cos^2 theta_u)``) and ``b = W^{1/2} y``:
 
-1. ``G = A^T A`` with ``A = W^{1/2} D`` (``W = diag(w cos^2 theta_u)``): the column norms ``E = diag(G)^{1/2}``
-   equilibrate it, ``R_1 = chol(E^{-1} G E^{-1})``;
-2. ``Q_1 = A E^{-1} R_1^{-1}`` block by block: ``C = Q_1^T Q_1`` and ``Q_1^T W^{1/2} y``; ``R_2 = chol(C)``,
-   ``R = R_2 R_1``, ``Q^T W^{1/2} y = R_2^{-T} Q_1^T W^{1/2} y`` (CholeskyQR2, exactly the sums of
-   :func:`polyjax._linalg.tall_qr`, accumulated in blocks);
-3. the residuals of the fitted coefficients, for the L2 of equation (11).
+Geometry (the directions and weights only, not the values; :func:`stream_geometry`, kept for every material on
+the same grid):
 
-Then the SVD of the ``m x m`` ``R`` as in :func:`polyjax.weighted_lstsq`. Pass 1 reads ``t`` and the weights,
-passes 2 and 3 also the values. Every degree of a batched fit shares pass 1 (columns are switched off in ``G``).
-When a Cholesky factor fails (a rank-deficient or badly conditioned design), the fit is done by the dense path
-instead, inside the same program, as :func:`~polyjax._linalg.tall_qr` falls back to Householder QR.
+1. ``G = A^T A``: the column norms ``E = diag(G)^{1/2}`` equilibrate it, ``R_1 = chol(E^{-1} G E^{-1})``;
+2. ``C = Q_1^T Q_1`` with ``Q_1 = A E^{-1} R_1^{-1}`` built block by block; ``R_2 = chol(C)``, ``R = R_2 R_1``
+   (CholeskyQR2, exactly the sums of :func:`polyjax._linalg.tall_qr`, accumulated in blocks) and the SVD
+   ``R = U S V^T``, which gives the rank and condition as in :func:`polyjax.weighted_lstsq`.
 
-Pass 1 and ``R_1`` depend on the directions and weights only, not on the values: :func:`stream_geometry`
-computes them in a program of their own, which :func:`polyjax.fit_polynomial` keeps for the next fit on the same
-samples (every MERL material shares the grid of directions, so a second material pays for passes 2 and 3 only).
+Values (:func:`streamed_lane`, two passes that read ``t``, the weights and the values):
+
+3. ``A^T b``: then ``Q^T b = R^{-T} E^{-1} A^T b`` and the minimum-norm solution ``beta_0`` from the SVD
+   (the semi-normal equations: ``R`` from the QR of ``A``, ``A`` itself only through ``A^T b``);
+4. the residuals ``r_0 = b - A beta_0``: ``|r_0|^2`` and ``A^T r_0``; one step of refinement
+   ``delta = R^{-1} R^{-T} A^T r_0`` (in the equilibrated columns), ``beta = beta_0 + delta`` (the corrected
+   semi-normal equations, as accurate as a QR solve; Bjorck, *Numerical methods for least squares problems*,
+   section 2.5.3), and the L2 of equation (11) from
+   ``|b - A beta|^2 = |r_0|^2 - 2 delta^T A^T r_0 + delta^T G delta``, whose last two terms are of second order in
+   the correction (no cancellation: the residual itself is accumulated, never ``|b|^2 - |Q^T b|^2``).
+
+Every degree of a batched fit shares the passes (columns are switched off per degree). When a Cholesky factor
+fails (a rank-deficient or badly conditioned design), the fit is done by the dense path instead, inside the same
+program, as :func:`~polyjax._linalg.tall_qr` falls back to Householder QR.
 
 Not differentiable: the loops have no derivative rule. :func:`polyjax.fit_polynomial` takes this path only for
 concrete inputs (a call outside ``jit``/``grad``/``vmap``); traced inputs take the dense, differentiable path.
@@ -31,7 +40,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._basis import design_matrix
+from ._basis import exponents
 from ._design import fitted_scaling
 from ._linalg import svd
 from ._lstsq import _solve_svd
@@ -39,8 +48,15 @@ from ._lstsq import _solve_svd
 #: shared-design fits with at least this many samples (and 8 times more than columns plus right-hand sides)
 #: are streamed
 STREAM_ROWS = 100_000
-#: rows per block: the block's design (``BLOCK x m``) stays in the CPU's cache
-BLOCK = 4096
+#: rows per block: the block's design (``m x BLOCK``) stays in the CPU's cache
+BLOCK = 8192
+#: the one-pass solution (semi-normal equations, step 3) is kept when the equilibrated design's condition number
+#: is at most this (its error bound ``kappa^2 eps`` is then within this factor of a QR solve's ``kappa eps``,
+#: below 1e-13 in float64) ...
+SNE_CONDITION = 30.0
+#: ... and the residual is at least this fraction of ``b^T b`` (``b^T b - 2 beta^T A^T b + beta^T G beta`` loses
+#: at most a factor ``1 / CANCELLATION`` of relative accuracy); otherwise the residual pass refines both
+CANCELLATION = 1e-3
 
 
 def use_stream(n: int, m: int, r: int, method: str, shared: bool, concrete: bool) -> bool:
@@ -73,8 +89,38 @@ def _chol_upper(g):
     return r, jnp.all(jnp.isfinite(r)) & jnp.all(jnp.diagonal(r) > 0)
 
 
+_HI = jax.lax.Precision.HIGHEST
+
+
+def _design_t(t_b, max_degree, basis, interactions):
+    """The design's rows transposed, ``(m, B)``, of the scaled components ``t_b (k, B)``: the columns of
+    :func:`polyjax._basis.design_matrix` (same order, same recurrence), each a contiguous run of samples, so the
+    arithmetic is vectorised along the samples and the sums below are matrix products."""
+    k = t_b.shape[0]
+    table = [jnp.ones_like(t_b), t_b][: max_degree + 1]  # table[d][j] = P_d(t_j) (or t_j^d)
+    for d in range(2, max_degree + 1):
+        if basis == "monomial":
+            table.append(table[-1] * t_b)
+        else:  # d P_d = (2d - 1) t P_{d-1} - (d - 1) P_{d-2}, by multiplications (a division costs several)
+            table.append(((2 * d - 1) / d) * t_b * table[-1] - ((d - 1) / d) * table[-2])
+    if not interactions:  # [1, Z_1..Z_k, Z_1^2..Z_k^2, ...]
+        return jnp.concatenate([jnp.ones_like(t_b[:1])] + table[1:], axis=0)
+    rows = []
+    for e in exponents(k, max_degree, interactions):
+        row = jnp.ones_like(t_b[0])
+        for j in range(k):
+            row = row * table[int(e[j])][j]
+        rows.append(row)
+    return jnp.stack(rows)
+
+
+def _rows(t_b, sw_b, max_degree, basis, interactions):
+    """``A^T = (W^{1/2} D)^T`` of a block, ``(m, B)``: dropped samples are exact zeros (their ``t`` is 0)."""
+    return _design_t(t_b, max_degree, basis, interactions) * sw_b[None]
+
+
 def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, block=None):
-    """What a streamed fit needs of the samples alone (not of the values): pass 1 and ``R_1``.
+    """What a streamed fit needs of the samples alone (not of the values): steps 1 and 2 of the module docstring.
 
     Args:
         x: ``(n, k)`` explanatory variables; ``wl``, ``wc2l``: ``(n,)`` the weights ``w`` and ``w cos^2 theta_u``
@@ -83,9 +129,10 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
         block: rows per block (default :data:`BLOCK`).
 
     Returns:
-        A dict of arrays: the PCA and scaling, ``t (n, k)``, the weights, and per degree the column norms
-        ``E``, ``R_1``, ``R_1^{-1}`` and whether the Cholesky factor succeeded. The same for every material on
-        one grid: :func:`polyjax.fit_polynomial` keeps the last one.
+        A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``sqrt(w cos^2 theta_u)``, ``G``, and
+        per degree the column norms ``E``, ``R_1^{-1}``, ``R_2``, the SVD of ``R = R_2 R_1`` and whether both
+        Cholesky factors succeeded. The same for every material on one grid: :func:`polyjax.fit_polynomial`
+        keeps the last one.
     """
     block = BLOCK if block is None else int(block)
     n = x.shape[0]
@@ -93,13 +140,15 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     keep = wl > 0
     pca, centre, hw, t = fitted_scaling(x, keep, basis)
     pos = wc2l > 0
+    t = jnp.where(pos[None], t.T, 0.0)  # (k, n): each component's samples contiguous; finite where dropped
     sw = jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
+    rows = lambda t_b, sw_b: _rows(t_b, sw_b, max_degree, basis, interactions)  # noqa: E731
 
     def gram(t_b, sw_b):
-        a = _rows(t_b, sw_b, max_degree, basis, interactions)
-        return jnp.matmul(a.T, a, precision=_HI)
+        a = rows(t_b, sw_b)  # (m, B)
+        return jnp.matmul(a, a.T, precision=_HI)
 
-    g = _stream_sum(gram, n, block, (t, sw), (0, 0))
+    g = _stream_sum(gram, n, block, (t, sw), (1, 0))
     m = g.shape[0]
     eye = jnp.eye(m, dtype=dtype)
 
@@ -114,17 +163,37 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
         return scale, r1, r1inv * act[:, None], pad, ok1
 
     scale, r1, r1inv, pad, ok1 = jax.vmap(first)(active)
-    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=wc2l,
-                den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1=r1, r1inv=r1inv, pad=pad, ok1=ok1)
+
+    def second(t_b, sw_b):
+        q1 = jnp.einsum("mb,dm,dmj->djb", rows(t_b, sw_b), 1.0 / scale, r1inv, precision=_HI)  # (D, m, B)
+        return jnp.einsum("dib,djb->dij", q1, q1, precision=_HI)
+
+    c = _stream_sum(second, n, block, (t, sw), (1, 0))
+
+    def finish(act, r1, c, pad):
+        r2, ok2 = _chol_upper(c + pad)
+        r2 = jnp.where(ok2, r2, eye)
+        uu, s, vt = svd(jnp.where(act[:, None] & act[None, :], r2 @ r1, 0.0))
+        return r2, uu, s, vt, ok2
+
+    r2, uu, s, vt, ok2 = jax.vmap(finish)(active, r1, c, pad)
+    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw, g=g,
+                den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
+                ok=jnp.all(ok1) & jnp.all(ok2))
 
 
-_HI = jax.lax.Precision.HIGHEST
+def _solve(geo, act_all, atb, n, rcond):
+    """``beta`` (D, r, m) minimising ``|b - A beta|`` given ``A^T b`` (D, m, r), per degree, from the geometry's
+    ``E``, ``R_1^{-1}``, ``R_2`` and SVD of ``R`` (step 3 of the module docstring); also rank, condition and the
+    number of active columns."""
 
+    def one(act, scale, r1inv, r2, uu, s, vt, atb):
+        q1tb = r1inv.T @ (atb / scale[:, None])  # (E R_1)^{-T} A^T b
+        qtb = jax.scipy.linalg.solve_triangular(r2, q1tb, lower=False, trans="T") * act[:, None]
+        (coef, rank, cond, _, n_act), _ = _solve_svd(uu, s, vt, uu.T @ qtb, scale, act, n, rcond)
+        return coef.T, rank, cond, n_act
 
-def _rows(t_b, sw_b, max_degree, basis, interactions):
-    """Rows of ``A = W^{1/2} D``: dropped samples are exact zero rows, also where their design is not finite."""
-    d = design_matrix(t_b, max_degree, basis, interactions)
-    return jnp.where(sw_b[:, None] > 0, d * sw_b[:, None], 0.0)
+    return jax.vmap(one)(act_all, geo["scale"], geo["r1inv"], geo["r2"], geo["u"], geo["s"], geo["vt"], atb)
 
 
 def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, dense, block=None):
@@ -142,38 +211,36 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
         l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
     """
     block = BLOCK if block is None else int(block)
-    t, sw, wc2l = geo["t"], geo["sw"], geo["wc2"]
-    n = t.shape[0]
-    eye = jnp.eye(geo["r1"].shape[-1], dtype=t.dtype)
-
-    def second(t_b, y_b, sw_b):
-        a = _rows(t_b, sw_b, max_degree, basis, interactions)
-        b = jnp.where(sw_b[:, None] > 0, y_b.T * sw_b[:, None], 0.0)  # (B, r)
-        q1 = jnp.einsum("bm,dm,dmj->dbj", a, 1.0 / geo["scale"], geo["r1inv"], precision=_HI)  # (D, B, m)
-        return jnp.einsum("dbi,dbj->dij", q1, q1, precision=_HI), jnp.einsum("dbi,br->dir", q1, b, precision=_HI)
-
-    c, q1tb = _stream_sum(second, n, block, (t, y, sw), (0, 1, 0))
-
-    def finish(act, scale, r1, c, q1tb, pad):
-        both = act[:, None] & act[None, :]
-        r2, ok2 = _chol_upper(c + pad)
-        r2 = jnp.where(ok2, r2, eye)
-        qtb = jax.scipy.linalg.solve_triangular(r2, q1tb, lower=False, trans="T") * act[:, None]
-        rr = jnp.where(both, r2 @ r1, 0.0)
-        uu, s, vt = svd(rr)
-        (coef, rank, cond, _, n_act), _ = _solve_svd(uu, s, vt, uu.T @ qtb, scale, act, n, rcond)
-        return coef.T, rank, cond, n_act, ok2  # coef (r, m)
-
-    coef, rank, cond, n_act, ok2 = jax.vmap(finish)(active, geo["scale"], geo["r1"], c, q1tb, geo["pad"])
-    ok = jnp.all(geo["ok1"]) & jnp.all(ok2)
+    t, wc2 = geo["t"], geo["wc2"]
+    n = t.shape[1]
+    design = lambda t_b: _design_t(t_b, max_degree, basis, interactions)  # noqa: E731
+    g = geo["g"]
+    n_deg = active.shape[0]
 
     def streamed():
-        def residuals(t_b, y_b, wc2_b):
-            d = design_matrix(t_b, max_degree, basis, interactions)
-            res = jnp.where(wc2_b > 0, y_b[None] - jnp.einsum("bm,drm->drb", d, coef, precision=_HI), 0.0)
-            return jnp.sum(wc2_b * res * res, axis=-1)  # (D, r)
+        def rhs(t_b, y_b, wc2_b):  # step 3: A^T b = D^T W y, and b^T b = y^T W y
+            wy = y_b * wc2_b[None]  # (r, B)
+            return jnp.einsum("mb,rb->mr", design(t_b), wy, precision=_HI), jnp.sum(wy * y_b, axis=-1)
 
-        num = _stream_sum(residuals, n, block, (t, y, wc2l), (0, 1, 0))
+        atb, bb = _stream_sum(rhs, n, block, (t, y, wc2), (1, 1, 0))
+        coef0, rank, cond, n_act = _solve(geo, active, jnp.broadcast_to(atb, (n_deg,) + atb.shape), n, rcond)
+        num0 = _residual_norm(bb, coef0, atb, g)  # (D, r)
+        one_pass = jnp.all(cond <= SNE_CONDITION) & jnp.all(num0 >= CANCELLATION * bb)
+
+        def refined():
+            def residuals(t_b, y_b, wc2_b):  # step 4: |r_0|^2 and A^T r_0 per degree
+                d = design(t_b)  # (m, B)
+                e = y_b[None] - jnp.einsum("drm,mb->drb", coef0, d, precision=_HI)  # (D, r, B)
+                we = e * wc2_b[None, None]
+                return jnp.sum(we * e, axis=-1), jnp.einsum("mb,drb->dmr", d, we, precision=_HI)
+
+            r0, atr = _stream_sum(residuals, n, block, (t, y, wc2), (1, 1, 0))
+            delta = _solve(geo, active, atr, n, rcond)[0]  # (D, r, m)
+            num = r0 - 2.0 * jnp.einsum("drm,dmr->dr", delta, atr) + jnp.einsum("drm,mk,drk->dr", delta, g, delta)
+            return coef0 + delta, num
+
+        coef, num = jax.lax.cond(one_pass, lambda: (coef0, num0), refined)
+        num = jnp.maximum(num, 0.0)
         den = geo["den"]
         nz = (den > 0) & (num != 0)
         l2 = jnp.where(nz, jnp.sqrt(jnp.where(nz, num, 1.0) / jnp.where(nz, den, 1.0)), 0.0)
@@ -181,4 +248,9 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
         tr = (geo["mean"], geo["rotation"], geo["centre"], geo["halfwidth"])
         return tr, coef, l2, rank, cond, n_act, geo["n_used"]
 
-    return jax.lax.cond(ok, streamed, dense)
+    return jax.lax.cond(geo["ok"], streamed, dense)
+
+
+def _residual_norm(bb, coef, atb, g):
+    """``|b - A beta|^2 = b^T b - 2 beta^T A^T b + beta^T G beta`` per degree and right-hand side."""
+    return bb - 2.0 * jnp.einsum("drm,mr->dr", coef, atb) + jnp.einsum("drm,mk,drk->dr", coef, g, coef)

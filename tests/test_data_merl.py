@@ -211,3 +211,46 @@ def test_errors_are_polyjax_errors():
 def test_write_rejects_wrong_shape(tmp_path):
     with pytest.raises(pj.InputError, match="values"):
         pj.data.write_merl_binary(tmp_path / "x.binary", np.zeros((3, 10)), resolution=SMALL_RES)
+
+
+def test_loaders_return_one_mask_row_when_every_lane_has_the_same_valid_bins(tmp_path):
+    """Bins missing in every channel (as in MERL's files) are no samples, and the mask is ``(n,)``: the fit shares
+    one design across the channels and equals a fit given the mask per lane; a bin missing in one channel only
+    keeps the mask ``(3, n)``."""
+    vals = np.abs(smooth_table(SMALL_RES, 0))  # every bin valid ...
+    vals[:, ::7] = -1.0  # ... but these, missing in every channel
+    pj.data.write_merl_binary(tmp_path / "same.binary", vals, resolution=SMALL_RES, mask=vals >= 0)
+    same = pj.data.load_merl_binary(tmp_path / "same.binary")
+    assert same.mask.shape == (same.n_samples,)
+    _, _, _, above = pj.data.merl_grid(SMALL_RES)
+    kept = np.flatnonzero(above & (vals[0] >= 0))  # a bin missing in every lane is no sample at all
+    assert same.n_samples == kept.size < int(above.sum())
+    assert same.mask.dtype == bool and bool(np.all(np.asarray(same.mask)))
+    fit = pj.fit_polynomial(same, degree=3)
+    explicit = pj.fit_polynomial(same.u, same.v, same.values, degree=3, weights=same.weights,
+                                 mask=np.broadcast_to(np.asarray(same.mask), same.values.shape))
+    np.testing.assert_allclose(fit.l2, explicit.l2, rtol=1e-12)
+    assert np.all(np.asarray(fit.status) == pj.Result.OK)
+
+    vals[1, 3] = -1.0  # one more bin, missing in G only
+    pj.data.write_merl_binary(tmp_path / "differ.binary", vals, resolution=SMALL_RES, mask=vals >= 0)
+    differ = pj.data.load_merl_binary(tmp_path / "differ.binary")
+    assert differ.mask.shape == differ.values.shape == (3, differ.n_samples)
+    assert pj.data.load_merl_binary([tmp_path / "same.binary"] * 2).mask.shape == (same.n_samples,)
+    assert pj.data.load_merl_binary([tmp_path / "same.binary", tmp_path / "differ.binary"]).mask.ndim == 3
+    assert same[1].mask.shape == (same.n_samples,) and differ[1].mask.shape == (differ.n_samples,)
+
+
+def test_loads_in_a_row_keep_their_own_values(tmp_path):
+    """Single-file loads read into one reused buffer: what a load returned never changes with the next load."""
+    a = write_small_merl(tmp_path / "a.binary", seed=1)
+    b = write_small_merl(tmp_path / "b.binary", seed=2)
+    first = pj.data.load_merl_binary(tmp_path / "a.binary")
+    kept = np.asarray(first.values).copy()
+    second = pj.data.load_merl_binary(tmp_path / "b.binary")
+    np.testing.assert_array_equal(np.asarray(first.values), kept)
+    _, _, _, above = pj.data.merl_grid(SMALL_RES)
+    for m, t in ((first, a), (second, b)):
+        idx = np.flatnonzero(above & (t >= 0).any(0))
+        ok = t[:, idx] >= 0
+        np.testing.assert_allclose(np.asarray(m.values)[ok], t[:, idx][ok], rtol=1e-14)

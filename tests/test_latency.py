@@ -25,24 +25,32 @@ def _cli(args, env):
 
 
 def test_cli_cache_is_hit_by_a_second_process(tmp_path):
-    """Two fresh processes: the first compiles (says so on stderr) and writes the cache; the second finds every
-    program there (no file added) and prints the same fit."""
+    """Two fresh processes: the first compiles (says so on stderr) and writes the cache and the fit's executable;
+    the second loads that executable (no file added anywhere) and prints the same fit as a process without any
+    cache."""
     env = {k: v for k, v in os.environ.items() if k not in ("POLYJAX_DATA", "POLYJAX_CACHE", "CI")}
     env.update(PYTHONPATH=str(ROOT), POLYJAX_COMPILE_NOTICE_SECS="0")
     folder = tmp_path / "jax-cache"
     args = ["fit", "--degree", "3", "--json", "--cache-dir", str(folder)]
     first = _cli(args, env)
     assert first.returncode == 0, first.stderr
-    written = sorted(p.name for p in folder.iterdir())
-    assert any(name.startswith("jit__fit_kernel") for name in written), written
+    written = sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+    assert any(name.startswith("jit_run") for name in written), written  # the whole fit: one program
+    assert len(list((folder / "polyjax-programs").glob("fit-*.bin"))) == 1, written
     assert "polyjax: compiling the fit" in first.stderr
     second = _cli(args, env)
     assert second.returncode == 0, second.stderr
-    assert sorted(p.name for p in folder.iterdir()) == written  # a compiled (missed) program would add a file
+    assert sorted(str(p.relative_to(folder)) for p in folder.rglob("*")) == written  # nothing compiled again
+    assert "compiling" not in second.stderr
     assert json.loads(second.stdout)["l2"] == json.loads(first.stdout)["l2"]
     off = _cli(["fit", "--degree", "3", "--json", "--no-cache"], dict(env, XDG_CACHE_HOME=str(tmp_path / "xdg")))
     assert off.returncode == 0, off.stderr
     assert not (tmp_path / "xdg").exists()
+    plain, warm = json.loads(off.stdout), json.loads(second.stdout)  # the eager fit of a process without a cache
+    for key in ("l2", "l2_zero_model", "status", "rank"):
+        assert warm[key] == plain[key], key
+    np.testing.assert_allclose(warm["coefficients"], plain["coefficients"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(warm["condition"], plain["condition"], rtol=1e-9)
 
 
 def test_import_leaves_jax_config_alone():
@@ -127,8 +135,16 @@ def small_stream(monkeypatch):
     fit_mod._fit_kernel.clear_cache()
 
 
+@pytest.mark.parametrize("branch", ["auto", "one pass", "refined"])
 @pytest.mark.parametrize("variables,degree", [("lafortune", [1, 3, 5]), ("ashikhmin-shirley", 4)])
-def test_streamed_fit_equals_dense_fit(small_stream, variables, degree):
+def test_streamed_fit_equals_dense_fit(small_stream, monkeypatch, variables, degree, branch):
+    """Both ways the streamed fit finishes (one pass over the values; a second, refining pass when the design is
+    ill-conditioned or the residual is tiny) give the dense fit's numbers."""
+    if branch == "one pass":
+        monkeypatch.setattr(stream_mod, "SNE_CONDITION", np.inf)
+        monkeypatch.setattr(stream_mod, "CANCELLATION", 0.0)
+    if branch == "refined":
+        monkeypatch.setattr(stream_mod, "SNE_CONDITION", 0.0)
     u, v, values, weights, mask = _tall_problem()
 
     def fit(u, v, values, weights, mask):
@@ -145,6 +161,21 @@ def test_streamed_fit_equals_dense_fit(small_stream, variables, degree):
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(getattr(streamed, field), getattr(dense, field))
     assert np.all(np.asarray(streamed.status) == pj.Result.OK)
+
+
+def test_streamed_fit_of_a_nearly_exact_polynomial_takes_the_refining_pass(small_stream):
+    """Values that the model fits to 1e-5 of their size: ``b^T b - 2 beta^T A^T b + beta^T G beta`` would lose
+    most digits of the residual, so the residual pass computes it; L2 and coefficients equal the dense fit's."""
+    u, v, _, weights, mask = _tall_problem()
+    x = np.asarray(pj.explanatory_variables("lafortune", u, v))
+    rng = np.random.default_rng(3)
+    values = np.stack([0.2 + 0.1 * x[:, 0] - 0.05 * x[:, 1] + 1e-6 * rng.normal(size=len(u)) for _ in range(2)])
+    streamed = pj.fit_polynomial(u, v, values, "lafortune", 3, weights=weights, mask=mask)
+    assert small_stream
+    dense = jax.jit(lambda *a: pj.fit_polynomial(*a, "lafortune", 3, weights=weights, mask=mask))(u, v, values)
+    assert np.all(np.asarray(streamed.l2) < 2e-6)
+    np.testing.assert_allclose(streamed.l2, dense.l2, rtol=1e-8)
+    np.testing.assert_allclose(streamed.coefficients, dense.coefficients, rtol=1e-9, atol=1e-12)
 
 
 def test_streamed_fit_falls_back_on_a_rank_deficient_design(small_stream):
@@ -169,3 +200,18 @@ def test_gradient_of_a_tall_fit_takes_the_dense_path(small_stream):
     fd = (loss(values + eps * direction) - loss(values - eps * direction)) / (2 * eps)  # eager: streamed
     assert small_stream
     np.testing.assert_allclose(float(np.sum(np.asarray(g) * direction)), float(fd), rtol=1e-6)
+
+
+def test_fit_command_parser_leaves_the_other_commands_unimported():
+    from polyjax._cli import _command_of
+
+    assert _command_of(["--data-root", "fit", "--no-cache", "fit", "--degree", "3"]) == "fit"
+    assert _command_of(["--cache-dir=x", "report"]) == "report"
+    assert _command_of(["--help"]) is None
+    code = ("import sys; from polyjax._cli import build_parser, _command_of; "
+            "argv = ['--no-cache', 'fit', '--degree', '3']; a = build_parser(_command_of(argv)).parse_args(argv); "
+            "print(a.degree, [m for m in ('polyjax.render', 'polyjax.svbrdf', 'polyjax.export') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["3", "[]"]

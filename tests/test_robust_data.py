@@ -41,7 +41,7 @@ def test_curet_negative_noise_values_are_kept_and_fitted():
     d = pj.data.load("curet")
     vals = np.asarray(d.values)
     assert int(np.sum(vals < 0)) == 29 and int(np.sum(vals == 0)) == 14
-    assert bool(np.all(np.asarray(d.mask)[vals < 0]))
+    assert bool(np.all(np.broadcast_to(np.asarray(d.mask), vals.shape)[vals < 0]))
     m = pj.fit_polynomial(d, degree=5)
     assert np.all(np.asarray(m.status) == pj.FitStatus.OK) and np.all(np.isfinite(np.asarray(m.l2)))
     kept = np.asarray(pj.cutoff_mask(d.u, d.v))

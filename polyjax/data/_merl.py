@@ -48,13 +48,14 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from .._errors import DataNotFoundError, InputError
-from .._measurements import Measurements
+from .._measurements import Measurements, lane_mask
 from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
 
 #: The resolution of the MERL database ``(n_theta_h, n_theta_d, n_phi_d)``.
@@ -225,10 +226,13 @@ def read_merl_binary(
 ) -> tuple[np.ndarray, tuple[int, int, int]]:
     """Read a MERL ``.binary`` file completely and check it.
 
+    The header and the file's size are checked first, from its first bytes and its size on disk; then the body is
+    read straight into the float64 array returned (one read, no intermediate copy).
+
     Args:
         path: the file.
         scaled: multiply by :data:`MERL_SCALE` (BRDF in 1/sr); False returns the stored numbers.
-        copy: with ``scaled=False``, False returns a read-only view of the bytes read instead of a copy.
+        copy: kept for compatibility: the array returned is always a fresh, writable array of its own.
 
     Returns:
         ``(values, resolution)`` with ``values`` float64 ``(3, N_h N_d N_p)`` in file order
@@ -238,48 +242,84 @@ def read_merl_binary(
         DataNotFoundError (no such file), EmptyFileError, TruncatedFileError, HeaderError, WrongFormatError,
         NonFiniteValueError.
     """
+    del copy
+    raw, res = _read_raw(path, None)
+    if scaled:
+        raw *= np.asarray(MERL_SCALE)[:, None]
+    return raw, res
+
+
+def _read_raw(path, scratch: dict | None) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """The checked ``(3, N)`` stored numbers of a ``.binary`` file: a fresh array, or, with ``scratch`` (a dict
+    holding a reusable buffer, see :data:`_SCRATCH`), read into that buffer (no fresh pages to fault in)."""
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"MERL .binary file {str(path)!r}: no such file")
-    data = path.read_bytes()
+    with open(path, "rb", buffering=0) as f:
+        size = os.fstat(f.fileno()).st_size
+        head = f.read(256)
+        res, n = _check_header(path, head, size)
+        f.seek(_HEADER_BYTES)
+        if scratch is None:
+            raw = np.fromfile(f, dtype="<f8", count=3 * n)
+            got = raw.size
+        else:
+            if scratch.get("buffer") is None or scratch["buffer"].size != 3 * n:
+                scratch["buffer"] = np.empty(3 * n, "<f8")
+            raw = scratch["buffer"]
+            view = memoryview(raw).cast("B")
+            got = 0
+            while got < view.nbytes:  # readinto may return less than asked for
+                k = f.readinto(view[got:])
+                if not k:
+                    break
+                got += k
+            got //= 8
+    if got != 3 * n:  # the file shrank while being read
+        raise TruncatedFileError(path, f"{3 * n} float64 values", f"{got}")
+    raw = raw.reshape(3, n)
+    if not np.isfinite(np.sum(raw)):  # a finite sum means every entry is finite; else find the culprits
+        finite = np.isfinite(raw)
+        if not finite.all():
+            c, idx = np.argwhere(~finite)[0]
+            raise NonFiniteValueError(
+                path, "finite numbers (negative = missing)",
+                f"{int((~finite).sum())} NaN/inf values (first: channel {'RGB'[c]}, bin {idx}: {raw[c, idx]})",
+            )
+    return raw, res
+
+
+#: the buffer a single-file :func:`load_merl_binary` reads into (the file's numbers are only gathered from, so
+#: one 35 MB buffer serves every load of a process instead of fresh memory each time), with its lock
+_SCRATCH: dict = {}
+_SCRATCH_LOCK = threading.Lock()
+
+
+def _check_header(path: Path, head: bytes, size: int) -> tuple[tuple[int, int, int], int]:
+    """The resolution and bin count of a ``.binary`` file from its first bytes and its size, or the error."""
     expected_header = "a MERL .binary file: int32 header (90, 90, 180) then 3 x N float64"
-    if len(data) == 0:
+    if size == 0:
         raise EmptyFileError(path, expected_header, "an empty file (0 bytes)")
     for sig, what in _SIGNATURES.items():
-        if data.startswith(sig):
+        if head.startswith(sig):
             raise WrongFormatError(path, expected_header, what)
-    if _looks_like_text(data[:256]):
-        raise WrongFormatError(path, expected_header, f"a text file (starts with {data[:40]!r})")
-    if len(data) < _HEADER_BYTES:
-        raise TruncatedFileError(path, "a 12-byte header (3 x int32)", f"only {len(data)} bytes")
-    dims = np.frombuffer(data, dtype="<i4", count=3)
+    if _looks_like_text(head):
+        raise WrongFormatError(path, expected_header, f"a text file (starts with {head[:40]!r})")
+    if size < _HEADER_BYTES:
+        raise TruncatedFileError(path, "a 12-byte header (3 x int32)", f"only {size} bytes")
+    dims = np.frombuffer(head, dtype="<i4", count=3)
     if np.any(dims <= 0) or int(np.prod(dims.astype(np.int64))) > _MAX_BINS:
         raise HeaderError(path, "3 positive int32 bin counts such as (90, 90, 180)", f"{tuple(int(d) for d in dims)}")
     res = tuple(int(d) for d in dims)
     n = int(np.prod(res))
     want = _HEADER_BYTES + 3 * 8 * n
-    if len(data) < want:
+    if size < want:
         raise TruncatedFileError(
-            path, f"{want} bytes for the header {res} (3 x {n} float64)",
-            f"{len(data)} bytes ({want - len(data)} missing)",
+            path, f"{want} bytes for the header {res} (3 x {n} float64)", f"{size} bytes ({want - size} missing)",
         )
-    if len(data) > want:
-        raise HeaderError(path, f"{want} bytes for the header {res}", f"{len(data)} bytes ({len(data) - want} extra)")
-    raw = np.frombuffer(data, dtype="<f8", offset=_HEADER_BYTES, count=3 * n).reshape(3, n)
-    finite = np.isfinite(raw)
-    if not finite.all():
-        c, idx = np.argwhere(~finite)[0]
-        raise NonFiniteValueError(
-            path, "finite numbers (negative = missing)",
-            f"{int((~finite).sum())} NaN/inf values (first: channel {'RGB'[c]}, bin {idx}: {raw[c, idx]})",
-        )
-    if scaled:
-        values = raw * np.asarray(MERL_SCALE)[:, None]
-    elif copy:
-        values = raw.copy()
-    else:  # read-only view of the file's bytes (the loader gathers and scales the kept bins itself)
-        values = raw
-    return values, res
+    if size > want:
+        raise HeaderError(path, f"{want} bytes for the header {res}", f"{size} bytes ({size - want} extra)")
+    return res, n
 
 
 def write_merl_binary(
@@ -350,34 +390,76 @@ def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarr
 
 @functools.lru_cache(maxsize=2)
 def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
-    """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set); cached."""
-    import jax.numpy as jnp
+    """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set) and an all-True ``(n,)``
+    mask; cached: every file on this grid hands out the same arrays (what a fit keeps for the grid is found
+    again by identity)."""
+    import jax
 
     u, v, w, above = merl_grid(resolution)
-    return tuple(jnp.asarray(a[above], dtype_name) for a in (u, v, w))
+    return tuple(jax.device_put(np.asarray(a[above], dtype_name)) for a in (u, v, w)) + (
+        jax.device_put(np.ones(int(above.sum()), bool)),)
 
 
-def _merl_measurements(values, valid, resolution, *, subsample, seed, names, source, scale=None) -> Measurements:
-    """values ``(m, 3, N)`` with ``valid`` ``(m, 3, N)`` -> Measurements over the kept bins; ``scale`` ``(3,)``
-    multiplies the kept values (the stored numbers of a ``.binary`` file are scaled after the gather)."""
+@functools.lru_cache(maxsize=4)
+def _above_index(resolution: tuple[int, int, int]) -> np.ndarray:
+    """File-order indices of the bins with both directions above the horizon."""
+    idx = np.flatnonzero(merl_grid(resolution)[3])
+    idx.setflags(write=False)
+    return idx
+
+
+def _aligned_empty(shape, dtype) -> np.ndarray:
+    """An uninitialised array on a 64-byte boundary: :func:`jax.device_put` then takes it over without a copy
+    (on the CPU); the loaders hand such an array, never touched again, to the device."""
+    dtype = np.dtype(dtype)
+    count = int(np.prod(shape))
+    buf = np.empty(count * dtype.itemsize + 64, np.uint8)
+    start = -buf.ctypes.data % 64
+    return buf[start:start + count * dtype.itemsize].view(dtype).reshape(shape)
+
+
+def _merl_measurements(values, resolution, *, subsample, seed, names, source, scale=None) -> Measurements:
+    """values ``(m, 3, N)`` (negative = missing) -> Measurements over the kept bins; ``scale`` ``(3,)`` multiplies
+    the kept values (the stored numbers of a ``.binary`` file are scaled after the gather). The mask is ``(n,)``
+    when every lane has the same valid bins (:func:`lane_mask`)."""
+    import jax
     import jax.numpy as jnp
 
-    u, v, w, above = merl_grid(tuple(resolution))
-    keep = _choose_bins(above & valid.any(axis=(0, 1)), subsample, seed, source)
-    vals = values[..., keep]
-    mask = valid[..., keep]
+    resolution = tuple(resolution)
+    u, v, w, above = merl_grid(resolution)
+    dtype = jnp.dtype(jnp.result_type(float))
+    if subsample is None:  # the usual case: gather the bins above the horizon once, then look at validity
+        keep = _above_index(resolution)
+        vals = np.take(values, keep, axis=-1, out=_aligned_empty(values.shape[:-1] + keep.shape, values.dtype))
+        if vals.min() >= 0.0:  # every kept bin valid in every lane
+            valid = None
+        else:
+            valid = vals >= 0.0
+            some = valid.any(axis=(0, 1))
+            if not some.all():
+                keep, vals, valid = keep[some], vals[..., some], valid[..., some]
+    else:
+        valid_all = values >= 0.0
+        keep = _choose_bins(above & valid_all.any(axis=(0, 1)), subsample, seed, source)
+        vals, valid = values[..., keep], valid_all[..., keep]
     if scale is not None:
         vals *= np.asarray(scale)[:, None]
+    if valid is not None:
+        np.copyto(vals, 0.0, where=~valid)
     single = vals.shape[0] == 1
     if single:
-        vals, mask = vals[0], mask[0]
-    dtype = jnp.dtype(jnp.result_type(float))
-    if keep.size == int(above.sum()):  # all bins above the horizon: reuse the cached device arrays
-        du, dv, dw = _device_grid(tuple(resolution), dtype.name)
+        vals = vals[0]
+        valid = None if valid is None else valid[0]
+    if keep.size == int(above.sum()):  # all bins above the horizon: the cached device arrays
+        du, dv, dw, all_true = _device_grid(resolution, dtype.name)
     else:
-        du, dv, dw = (jnp.asarray(a[keep], dtype) for a in (u, v, w))
+        du, dv, dw = (jax.device_put(np.asarray(a[keep], dtype)) for a in (u, v, w))
+        all_true = None
+    mask = lane_mask(valid) if valid is not None else all_true
+    mask = jax.device_put(np.ones(keep.size, bool)) if mask is None else mask
     return Measurements(
-        u=du, v=dv, values=jnp.asarray(np.where(mask, vals, 0.0), dtype), weights=dw, mask=jnp.asarray(mask),
+        u=du, v=dv, values=jax.device_put(vals if vals.dtype == dtype else np.asarray(vals, dtype)), weights=dw,
+        mask=mask if isinstance(mask, jax.Array) else jax.device_put(mask),
         names=tuple(names), channels=("R", "G", "B"),
         axes=("channel",) if single else ("material", "channel"), source=source,
     )
@@ -411,21 +493,23 @@ def load_merl_binary(
     plist = [Path(paths)] if single else [Path(p) for p in paths]
     if not plist:
         raise InputError("paths: expected at least one MERL .binary file")
+    names = tuple(names) if names is not None else tuple(p.stem for p in plist)
+    if len(names) != len(plist):
+        raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
+    source = (f"MERL .binary {', '.join(p.name for p in plist)}"
+              + (f" (subsample {subsample}, seed {seed})" if subsample else ""))
+    if len(plist) == 1:  # read into the reused buffer, gathered from before the lock is released
+        with _SCRATCH_LOCK:
+            raw, res = _read_raw(plist[0], _SCRATCH)
+            return _merl_measurements(raw[None], res, subsample=subsample, seed=seed, names=names,
+                                      scale=MERL_SCALE, source=source)
     tables = []
     res = None
     for p in plist:
-        vals, r = read_merl_binary(p, scaled=False, copy=False)
+        vals, r = _read_raw(p, None)
         if res is not None and r != res:
             raise HeaderError(p, f"the resolution {res} of {plist[0]}", f"{r}")
         res = r
         tables.append(vals)
-    values = tables[0][None] if len(tables) == 1 else np.stack(tables)  # one file: no copy before the gather
-    valid = values >= 0.0
-    names = tuple(names) if names is not None else tuple(p.stem for p in plist)
-    if len(names) != len(plist):
-        raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
-    return _merl_measurements(
-        values, valid, res, subsample=subsample, seed=seed, names=names, scale=MERL_SCALE,
-        source=f"MERL .binary {', '.join(p.name for p in plist)}"
-        + (f" (subsample {subsample}, seed {seed})" if subsample else ""),
-    )
+    return _merl_measurements(np.stack(tables), res, subsample=subsample, seed=seed, names=names, scale=MERL_SCALE,
+                              source=source)

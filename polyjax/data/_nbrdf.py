@@ -360,7 +360,7 @@ def load_merl_nbrdf(
 
     Returns:
         One name: ``values (3, n)``, ``axes=("channel",)``, ``names=(name,)``; several: ``(m, 3, n)``,
-        ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr; mask all True.
+        ``axes=("material", "channel")``; ``channels=("R", "G", "B")``, BRDF in 1/sr; mask ``(n,)``, all True.
     """
     names, single = _resolve_names(name_or_names)
     return _grid_measurements(merl_nbrdf_path(root), names, single, subsample, seed,
@@ -406,7 +406,7 @@ def _grid_measurements(path, names, single, subsample, seed, what) -> Measuremen
     if single:
         vals = vals[0]
     return Measurements(
-        u=u, v=v, values=vals, weights=w, mask=jnp.ones(vals.shape, bool),
+        u=u, v=v, values=vals, weights=w, mask=jnp.ones(vals.shape[-1:], bool),
         names=tuple(names), channels=("R", "G", "B"),
         axes=("channel",) if single else ("material", "channel"),
         source=f"{what} {', '.join(names)} on the MERL grid, "

@@ -5,10 +5,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import jax.numpy as jnp
+import numpy as np
 
 from .._errors import InputError
 from .._geometry import safe_normalize
-from .._measurements import Measurements
+from .._inputs import is_concrete
+from .._measurements import Measurements, lane_mask
 from ._merl import MERL_RESOLUTION, _choose_bins, merl_grid
 
 GRIDS = ("merl",)
@@ -62,6 +64,8 @@ def tabulate(
         values = values.astype(u.dtype)
     finite = jnp.isfinite(values)
     values = jnp.where(finite, values, 0.0)
+    if is_concrete(finite):  # (n,) when every lane is finite at the same samples, as every loader's mask
+        finite = jnp.asarray(lane_mask(np.asarray(finite)))
     if axes is None:
         axes = ("channel",) if samples_first else ()
     if channels is None:
