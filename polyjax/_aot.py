@@ -99,7 +99,7 @@ def fit_saved(data, folder: Path | None, **options):
         from ._model import PolynomialBRDF
         from ._variables import get_variables
 
-        _check_options(options["basis"], "qr", "flag", options["degree"])
+        _check_options(options["basis"], "qr", "flag", options["degree"], 1)  # lane_block: any valid value
         vs = get_variables(options["variables"])
         arrays = (data.u, data.v, data.values, data.weights, data.mask)
         opts = dict(options, variables=vs.name, degree=tuple(options["degree"]) if isinstance(
