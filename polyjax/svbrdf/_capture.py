@@ -7,7 +7,8 @@ every texel: its view direction is ``v = normalize(camera - p)``, one per texel.
 (``camera (C, 3)``, a multi-view gonioreflectometer or a hand-held capture): every camera photographs the sample
 under every light, so a texel has ``C K`` observations, ``K`` light directions under each of ``C`` view directions.
 Point light ``k`` at ``l_k`` with intensity ``I`` (W/sr, RGB or grey) gives the texel the irradiance
-``E = I / |l_k - p|^2`` on a surface facing it and the light direction ``u = normalize(l_k - p)``. The photograph's pixel of a texel is its outgoing radiance
+``E = I / |l_k - p|^2`` on a surface facing it and the light direction ``u = normalize(l_k - p)``. The
+photograph's pixel of a texel is its outgoing radiance
 
 .. math::
     L_k = f(u_k, v)\, E_k \cos\theta_{u_k},
