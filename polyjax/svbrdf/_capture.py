@@ -60,6 +60,20 @@ def hemisphere_lights(k: int, radius: float = 2.5, min_elevation_deg: float = 15
     return radius * np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def spread_cameras(c: int, radius: float = 2.9, max_elevation_deg: float = 70.0,
+                   min_elevation_deg: float = 15.0) -> np.ndarray:
+    """``c`` camera positions ``(c, 3)`` on the hemisphere of ``radius`` above the sample, a multi-view rig whose
+    views spread over the domain of the Lafortune variables: elevations evenly from ``max_elevation_deg`` (near
+    the normal: ``u_z v_z`` up to about ``cos 20 deg``) down to ``min_elevation_deg`` (grazing:
+    ``|u_x v_x + u_y v_y|`` up to about ``sin 75 deg``), azimuths ``-90 + 360 i / c`` degrees (the first camera on
+    the side of the default camera)."""
+    if int(c) < 1:
+        raise InputError(f"c: expected at least one camera, found {c}")
+    el = np.radians(np.linspace(max_elevation_deg, min_elevation_deg, int(c)))
+    az = np.radians(-90.0 + 360.0 * np.arange(int(c)) / int(c))
+    return radius * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+
+
 def blend_map(height: int, width: int, n_materials: int = 2, rows: slice | None = None) -> np.ndarray:
     """A smooth blend map ``(H, W, M)`` (non-negative, summing to 1 over materials): sums of low-frequency
     sinusoids, so that every texel mixes the materials differently and some are pure."""
