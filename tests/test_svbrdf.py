@@ -125,6 +125,26 @@ def test_svbrdf_cli(tmp_path, capsys):
     np.testing.assert_allclose(exr.coefficients, npz.coefficients, rtol=2.0**-48, atol=0)
 
 
+@pytest.mark.data
+def test_svbrdf_cli_cameras(tmp_path, capsys):
+    """``--cameras 3`` (``svbrdf.spread_cameras(3)``) and explicit positions: every texel fitted from C K
+    photographs, re-rendered from every camera."""
+    from polyjax._cli import main
+
+    for cams, c in (("3", 3), ("0,-1.5,2.5;1,1,2", 2)):
+        out_dir = tmp_path / f"tex{c}"
+        rc = main(["svbrdf", "--size", "4", "--lights", "16", "--cameras", cams, "--materials", ",".join(MATERIALS),
+                   "--degree", "2", "--out", str(out_dir), "--format", "npz", "--json"])
+        assert rc == 0
+        out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+        assert out["cameras"] == c and out["texels"] == 16 and out["not_ok_local"] == 0
+        assert 25.0 < out["psnr_new_light"] < 80.0
+        model = svbrdf.read_texture_shards(out_dir)
+        np.testing.assert_array_equal(model.n_used, c * 16)
+        assert np.load(out_dir / "rows-0-4.npz").files and np.load(out_dir / "relit-rows-0-4.npz")["relit"].shape == (
+            c, 4, 4, 3)
+
+
 def test_svbrdf_cli_bad_light(tmp_path, capsys):
     from polyjax._cli import main
 
@@ -132,6 +152,10 @@ def test_svbrdf_cli_bad_light(tmp_path, capsys):
     assert "--new-light: expected 3 comma-separated numbers" in capsys.readouterr().err
     assert main(["svbrdf", "--format", "npz,tiff", "--out", str(tmp_path)]) == 2
     assert "--format: expected npz, exr or npz,exr, found 'npz,tiff'" in capsys.readouterr().err
+    assert main(["svbrdf", "--cameras", "1,2,3;4,5", "--out", str(tmp_path)]) == 2
+    assert "--cameras: expected an integer or x,y,z[;x,y,z...], found '1,2,3;4,5'" in capsys.readouterr().err
+    assert main(["svbrdf", "--cameras", "0", "--out", str(tmp_path)]) == 2
+    assert "--cameras: expected at least one camera, found '0'" in capsys.readouterr().err
 
 
 def test_capture_observations_are_the_brdf():
