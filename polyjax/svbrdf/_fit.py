@@ -13,9 +13,8 @@ def fit_capture(capture: Capture, variables: str = "lafortune", degree: int = 3,
 
     Each texel is fitted alone, from its own ``K`` observations (``C K`` with ``C`` cameras) at its own light and
     view directions (its own PCA and design; its three channels share them): :func:`polyjax.fit_polynomial` with
-    per-lane directions,
-    weighted so that the residuals are the photographs' radiance errors (:meth:`Capture.observations`).
-    Closed form, no initial guess; differentiable like every fit.
+    per-lane directions, weighted so that the residuals are the photographs' radiance errors
+    (:meth:`Capture.observations`). Closed form, no initial guess; differentiable like every fit.
 
     Args:
         capture: a :class:`Capture`.
