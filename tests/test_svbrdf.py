@@ -26,7 +26,7 @@ def capture_fit():
     return _capture_fit(MATERIALS)
 
 
-def _recovery_ratios(capture_fit):
+def _recovery_ratios(capture_fit, at_least_one=True):
     """Per texel and channel: L2 of the texel's fit (48 photographs at one view direction) on the MERL grid
     against the texel's true blend, over the L2 of the fit to that blend's own MERL-grid data at the same degree."""
     mats, cap, model = capture_fit
@@ -39,7 +39,9 @@ def _recovery_ratios(capture_fit):
     ratios = np.stack([np.asarray(pj.l2_error(truth[t], model[i, j](grid.u, grid.v), grid.u, grid.v,
                                               weights=grid.weights)) / np.asarray(own.l2[t])
                        for t, (i, j) in enumerate(TEXELS)])
-    assert ratios.shape == (5, 3) and np.all(ratios >= 1.0 - 1e-9), ratios  # the grid fit is the optimum there
+    assert ratios.shape == (5, 3)
+    if at_least_one:  # one view: the grid fit is the optimum there (see the several-views test for why not always)
+        assert np.all(ratios >= 1.0 - 1e-9), ratios
     return ratios
 
 
@@ -123,6 +125,26 @@ def test_svbrdf_cli(tmp_path, capsys):
     np.testing.assert_allclose(exr.coefficients, npz.coefficients, rtol=2.0**-48, atol=0)
 
 
+@pytest.mark.data
+def test_svbrdf_cli_cameras(tmp_path, capsys):
+    """``--cameras 3`` (``svbrdf.spread_cameras(3)``) and explicit positions: every texel fitted from C K
+    photographs, re-rendered from every camera."""
+    from polyjax._cli import main
+
+    for cams, c in (("3", 3), ("0,-1.5,2.5;1,1,2", 2)):
+        out_dir = tmp_path / f"tex{c}"
+        rc = main(["svbrdf", "--size", "4", "--lights", "16", "--cameras", cams, "--materials", ",".join(MATERIALS),
+                   "--degree", "2", "--out", str(out_dir), "--format", "npz", "--json"])
+        assert rc == 0
+        out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+        assert out["cameras"] == c and out["texels"] == 16 and out["not_ok_local"] == 0
+        assert 25.0 < out["psnr_new_light"] < 80.0
+        model = svbrdf.read_texture_shards(out_dir)
+        np.testing.assert_array_equal(model.n_used, c * 16)
+        assert np.load(out_dir / "rows-0-4.npz").files and np.load(out_dir / "relit-rows-0-4.npz")["relit"].shape == (
+            c, 4, 4, 3)
+
+
 def test_svbrdf_cli_bad_light(tmp_path, capsys):
     from polyjax._cli import main
 
@@ -130,6 +152,10 @@ def test_svbrdf_cli_bad_light(tmp_path, capsys):
     assert "--new-light: expected 3 comma-separated numbers" in capsys.readouterr().err
     assert main(["svbrdf", "--format", "npz,tiff", "--out", str(tmp_path)]) == 2
     assert "--format: expected npz, exr or npz,exr, found 'npz,tiff'" in capsys.readouterr().err
+    assert main(["svbrdf", "--cameras", "1,2,3;4,5", "--out", str(tmp_path)]) == 2
+    assert "--cameras: expected an integer or x,y,z[;x,y,z...], found '1,2,3;4,5'" in capsys.readouterr().err
+    assert main(["svbrdf", "--cameras", "0", "--out", str(tmp_path)]) == 2
+    assert "--cameras: expected at least one camera, found '0'" in capsys.readouterr().err
 
 
 def test_capture_observations_are_the_brdf():
@@ -236,3 +262,88 @@ def eqx_tree_set(model, name, value):
     import equinox as eqx
 
     return eqx.tree_at(lambda m: getattr(m, name), model, value)
+
+
+# ---- several camera positions -------------------------------------------------------------------------------------
+
+# three cameras at elevations 70, 42.5 and 15 degrees (azimuths -90, 30, 150): the fewest found whose views cover
+# the Lafortune domain that one view leaves unseen (docs/scale.md); two (70 and 15) reach 1.23x, three at one
+# elevation (45) 1.54x: the elevations matter
+CAMERAS = 3
+
+
+@pytest.fixture(scope="module")
+def multiview_fit():
+    mats = [pj.data.load_nbrdf(n) for n in MATERIALS]
+    cap = svbrdf.simulate_capture(mats, 8, 8, n_lights=48, camera=svbrdf.spread_cameras(CAMERAS))
+    return mats, cap, svbrdf.fit_capture(cap, VARIABLES, DEGREE)
+
+
+@pytest.mark.data
+def test_texels_recover_their_material_from_several_views(multiview_fit):
+    """The issue's target met with three camera positions (``svbrdf.spread_cameras(3)``, 48 lights each, 144
+    observations per texel): every one of the same 5 texels x 3 channels within 1.2x of the fit to its blend's own
+    MERL-grid data (measured 0.94 - 1.10, against 1.10 - 1.61 from the one default camera).
+
+    Ratios below 1 are possible here: equation (3) is a sum of one-variable polynomials in the principal components
+    (no cross terms), so its family depends on the PCA rotation, and the grid fit is the optimum for the grid's
+    rotation only; a texel fitted from views spread over the domain, with its own rotation, can do better."""
+    _, cap, model = multiview_fit
+    assert cap.images.shape == (CAMERAS, 48, 8, 8, 3) and model.batch_shape == (8, 8, 3)
+    assert np.all(np.asarray(model.n_used) == CAMERAS * 48)
+    ratios = _recovery_ratios(multiview_fit, at_least_one=False)
+    assert np.all(ratios > 0.9) and np.all(ratios <= 1.2), ratios
+
+
+def test_several_cameras_observations_and_relight():
+    """C cameras give every texel C K observations (camera-major), each camera's the same numbers as a capture by
+    that camera alone; a camera given as (1, 3) is the one-camera capture; relight/photograph render from every
+    camera, or from a new one."""
+    f = lambda u, v: jnp.stack([0.3 + u[..., 2] * v[..., 2], 0.1 + (u[..., 0] * v[..., 0]) ** 2,  # noqa: E731
+                                0.2 + 0.5 * u[..., 1] ** 2 * v[..., 2]], -1)
+    cams = svbrdf.spread_cameras(2)
+    cap = svbrdf.simulate_capture([f], 4, 6, n_lights=10, camera=cams)
+    u, v, b, w = cap.observations()
+    assert cap.images.shape == (2, 10, 4, 6, 3)
+    assert u.shape == v.shape == (4, 6, 20, 3) and b.shape == (4, 6, 3, 20) and w.shape == (4, 6, 20)
+    np.testing.assert_allclose(b, jnp.moveaxis(f(u, v), -1, -2), rtol=1e-12)
+    for c in range(2):
+        one = svbrdf.simulate_capture([f], 4, 6, n_lights=10, camera=cams[c])
+        for got, want, ax in zip((u, v, b, w), one.observations(), (2, 2, 3, 2)):
+            np.testing.assert_array_equal(np.take(np.asarray(got), np.arange(10 * c, 10 * c + 10), axis=ax), want)
+    assert not np.allclose(v[..., 0, :], v[..., 10, :])  # two view directions per texel
+    c1 = svbrdf.simulate_capture([f], 4, 6, n_lights=10, camera=[[0.0, -1.5, 2.5]])
+    c0 = svbrdf.simulate_capture([f], 4, 6, n_lights=10)
+    for got, want in zip(c1.observations(), c0.observations()):
+        np.testing.assert_array_equal(got, want)
+    m1, m0 = svbrdf.fit_capture(c1, "lafortune", 2), svbrdf.fit_capture(c0, "lafortune", 2)
+    np.testing.assert_array_equal(m1.coefficients, m0.coefficients)
+
+    model = svbrdf.fit_capture(cap, "lafortune", 2)
+    light = (0.7, 0.9, 2.2)
+    image, ref = svbrdf.relight(model, cap, light), svbrdf.photograph([f], cap, light)
+    assert image.shape == ref.shape == (2, 4, 6, 3)
+    np.testing.assert_allclose(image[1], svbrdf.relight(model, cap, light, camera=cams[1]), rtol=1e-14)
+    new = svbrdf.photograph([f], cap, light, camera=(1.0, 1.0, 2.0))
+    assert new.shape == (4, 6, 3) and float(pj.psnr(svbrdf.relight(model, cap, light, camera=(1.0, 1.0, 2.0)),
+                                                    new)) > 30.0
+    with pytest.raises(pj.InputError, match=r"camera: expected a position \(3,\) or C positions \(C, 3\)"):
+        svbrdf.simulate_capture([f], 4, 6, n_lights=10, camera=(1.0, 2.0))
+    with pytest.raises(pj.InputError, match="c: expected at least one camera"):
+        svbrdf.spread_cameras(0)
+
+
+def test_several_cameras_fit_differentiates():
+    """The fit of a two-camera capture differentiates with respect to the camera positions (forward and reverse)."""
+    import jax
+    from jax.test_util import check_grads
+
+    f = lambda u, v: jnp.stack([0.3 + u[..., 2] * v[..., 2]] * 3, -1)  # noqa: E731
+    cams = jnp.asarray(svbrdf.spread_cameras(2))
+
+    def coef(c):
+        cap = svbrdf.simulate_capture([f], 2, 2, n_lights=8, camera=c)
+        return svbrdf.fit_capture(cap, "lafortune", 1).coefficients.sum()
+
+    assert np.isfinite(float(jax.grad(coef)(cams).sum()))
+    check_grads(coef, (cams,), order=1, modes=("fwd", "rev"), atol=1e-5, rtol=1e-5)

@@ -14,6 +14,7 @@ from ._capture import (
     radiance,
     relight,
     simulate_capture,
+    spread_cameras,
     texel_positions,
 )
 from ._distributed import ROWS, fit_rows_distributed, free_port, initialize, local_rows, row_mesh
@@ -23,5 +24,6 @@ from ._shards import MANIFEST, read_texture_shards, write_texture_shards
 __all__ = [
     "Capture", "MANIFEST", "ROWS", "blend_map", "blended_brdf", "directions", "fit_capture", "fit_rows_distributed",
     "free_port", "hemisphere_lights", "initialize", "local_rows", "photograph", "radiance", "read_texture_shards",
-    "relight", "row_mesh", "simulate_capture", "texel_positions", "write_texture_shards",
+    "relight", "row_mesh", "simulate_capture", "spread_cameras",
+    "texel_positions", "write_texture_shards",
 ]

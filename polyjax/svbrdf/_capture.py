@@ -3,9 +3,12 @@ r"""A simulated capture of a flat spatially varying sample: texels photographed 
 Geometry (the sample's local frame is the world frame): the sample is the square ``|x|, |y| <= size / 2`` of the
 plane ``z = 0``, normal ``+z``, divided into ``H x W`` texels (row ``i`` along ``y``, column ``j`` along ``x``,
 texel centres ``((j + 1/2) / W - 1/2, (i + 1/2) / H - 1/2) size``). A fixed pinhole camera at ``camera`` sees
-every texel: its view direction is ``v = normalize(camera - p)``, one per texel. Point light ``k`` at ``l_k``
-with intensity ``I`` (W/sr, RGB or grey) gives the texel the irradiance ``E = I / |l_k - p|^2`` on a surface facing
-it and the light direction ``u = normalize(l_k - p)``. The photograph's pixel of a texel is its outgoing radiance
+every texel: its view direction is ``v = normalize(camera - p)``, one per texel. A capture may have ``C`` cameras
+(``camera (C, 3)``, a multi-view gonioreflectometer or a hand-held capture): every camera photographs the sample
+under every light, so a texel has ``C K`` observations, ``K`` light directions under each of ``C`` view directions.
+Point light ``k`` at ``l_k`` with intensity ``I`` (W/sr, RGB or grey) gives the texel the irradiance
+``E = I / |l_k - p|^2`` on a surface facing it and the light direction ``u = normalize(l_k - p)``. The
+photograph's pixel of a texel is its outgoing radiance
 
 .. math::
     L_k = f(u_k, v)\, E_k \cos\theta_{u_k},
@@ -57,6 +60,20 @@ def hemisphere_lights(k: int, radius: float = 2.5, min_elevation_deg: float = 15
     return radius * np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def spread_cameras(c: int, radius: float = 2.9, max_elevation_deg: float = 70.0,
+                   min_elevation_deg: float = 15.0) -> np.ndarray:
+    """``c`` camera positions ``(c, 3)`` on the hemisphere of ``radius`` above the sample, a multi-view rig whose
+    views spread over the domain of the Lafortune variables: elevations evenly from ``max_elevation_deg`` (near
+    the normal: ``u_z v_z`` up to about ``cos 20 deg``) down to ``min_elevation_deg`` (grazing:
+    ``|u_x v_x + u_y v_y|`` up to about ``sin 75 deg``), azimuths ``-90 + 360 i / c`` degrees (the first camera on
+    the side of the default camera)."""
+    if int(c) < 1:
+        raise InputError(f"c: expected at least one camera, found {c}")
+    el = np.radians(np.linspace(max_elevation_deg, min_elevation_deg, int(c)))
+    az = np.radians(-90.0 + 360.0 * np.arange(int(c)) / int(c))
+    return radius * np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=-1)
+
+
 def blend_map(height: int, width: int, n_materials: int = 2, rows: slice | None = None) -> np.ndarray:
     """A smooth blend map ``(H, W, M)`` (non-negative, summing to 1 over materials): sums of low-frequency
     sinusoids, so that every texel mixes the materials differently and some are pure."""
@@ -95,23 +112,39 @@ def blended_brdf(materials: Sequence[BRDFFn], blend: Float[ArrayLike, "*texels M
     return out
 
 
+def _check_camera(camera, dtype) -> Array:
+    cam = jnp.asarray(camera, dtype)
+    if cam.shape[-1:] != (3,) or cam.ndim not in (1, 2) or cam.size == 0:
+        raise InputError(f"camera: expected a position (3,) or C positions (C, 3), found shape {cam.shape}")
+    return cam
+
+
+def _views(camera: Array, one_view: Callable[[Array], Array]) -> Array:
+    """``one_view(camera (3,))`` for one camera, or stacked ``(C, ...)`` over the cameras ``(C, 3)``."""
+    if camera.ndim == 1:
+        return one_view(camera)
+    return jnp.stack([one_view(c) for c in camera])
+
+
 class Capture(eqx.Module):
-    """Photographs of a flat sample (or of rows ``row0 .. row0 + h`` of it) under point lights.
+    """Photographs of a flat sample (or of rows ``row0 .. row0 + h`` of it) under point lights, by one camera or
+    by ``C`` cameras.
 
     Attributes:
-        images: ``(K, h, W, 3)`` radiance of every texel under each light (the photographs on the texel grid).
+        images: ``(K, h, W, 3)`` radiance of every texel under each light (the photographs on the texel grid);
+            ``(C, K, h, W, 3)`` with ``C`` cameras.
         positions: ``(h, W, 3)`` texel centres.
         lights: ``(K, 3)`` light positions; ``intensity``: ``(3,)`` RGB intensity of every light.
-        camera: ``(3,)`` camera position.
+        camera: ``(3,)`` camera position, or ``(C, 3)`` positions of ``C`` cameras.
         blend: ``(h, W, M)`` the true blend map (for evaluation only; the fit does not see it).
         height, width, size, row0: the full texture's shape and side length, and the first row held here.
     """
 
-    images: Float[Array, "K h W 3"]
+    images: Float[Array, "*C K h W 3"]
     positions: Float[Array, "h W 3"]
     lights: Float[Array, "K 3"]
     intensity: Float[Array, "3"]
-    camera: Float[Array, "3"]
+    camera: Float[Array, "*C 3"]
     blend: Float[Array, "h W M"]
     height: int = eqx.field(static=True)
     width: int = eqx.field(static=True)
@@ -119,20 +152,31 @@ class Capture(eqx.Module):
     row0: int = eqx.field(static=True, default=0)
 
     def observations(self):
-        r"""The fit's inputs: ``u (h, W, K, 3)``, ``v (h, W, K, 3)``, BRDF values ``b = L / (E cos theta_u)``
-        ``(h, W, 3, K)`` and weights ``w = E^2 (h, W, K)``.
+        r"""The fit's inputs: ``u (h, W, n, 3)``, ``v (h, W, n, 3)``, BRDF values ``b = L / (E cos theta_u)``
+        ``(h, W, 3, n)`` and weights ``w = E^2 (h, W, n)``, ``n = K`` observations per texel with one camera,
+        ``n = C K`` with ``C`` cameras (camera-major: observation ``c K + k`` is light ``k`` seen by camera ``c``).
 
         With these weights the objective of :func:`polyjax.fit_polynomial`, ``sum_k w_k cos^2(theta_u) (b_k -
-        f(u_k, v))^2 = sum_k (L_k - E_k cos(theta_u) f(u_k, v))^2``, is the squared error of the photographs
+        f(u_k, v_k))^2 = sum_k (L_k - E_k cos(theta_u) f(u_k, v_k))^2``, is the squared error of the photographs
         in radiance. Lights at or below a texel's horizon give no observation (weight 0).
         """
-        u, v, d2, cos = directions(self.positions, self.lights, self.camera)
-        e = jnp.asarray(self.intensity).mean() / d2  # (h, W, K)
-        ok = cos > 1e-6
-        b = jnp.moveaxis(self.images, 0, -2) / jnp.where(ok, e * cos, 1.0)[..., None]  # (h, W, K, 3)
-        b = jnp.where(ok[..., None], b / (jnp.asarray(self.intensity) / jnp.asarray(self.intensity).mean()), 0.0)
-        vk = jnp.broadcast_to(v[..., None, :], u.shape)
-        return u, vk, jnp.moveaxis(b, -1, -2), jnp.where(ok, e * e, 0.0)
+        if self.camera.ndim == 1:
+            return _observations(self.images, self.positions, self.lights, self.intensity, self.camera)
+        views = [_observations(im, self.positions, self.lights, self.intensity, c)
+                 for im, c in zip(self.images, self.camera)]
+        u, v, b, w = (jnp.concatenate(parts, axis=ax) for parts, ax in zip(zip(*views), (-2, -2, -1, -1)))
+        return u, v, b, w
+
+
+def _observations(images, positions, lights, intensity, camera):
+    """:meth:`Capture.observations` of one camera's photographs ``images (K, h, W, 3)``."""
+    u, v, d2, cos = directions(positions, lights, camera)
+    e = jnp.asarray(intensity).mean() / d2  # (h, W, K)
+    ok = cos > 1e-6
+    b = jnp.moveaxis(images, 0, -2) / jnp.where(ok, e * cos, 1.0)[..., None]  # (h, W, K, 3)
+    b = jnp.where(ok[..., None], b / (jnp.asarray(intensity) / jnp.asarray(intensity).mean()), 0.0)
+    vk = jnp.broadcast_to(v[..., None, :], u.shape)
+    return u, vk, jnp.moveaxis(b, -1, -2), jnp.where(ok, e * e, 0.0)
 
 
 def simulate_capture(
@@ -155,7 +199,8 @@ def simulate_capture(
         materials: ``M`` BRDFs ``f(u, v) -> (..., 3)`` (e.g. :func:`polyjax.data.load_nbrdf` networks).
         height, width: the texture's size in texels.
         n_lights, lights: ``lights (K, 3)`` positions, or ``n_lights`` of :func:`hemisphere_lights`.
-        camera: the camera position; intensity: every light's intensity (grey or RGB).
+        camera: the camera position ``(3,)``, or ``(C, 3)`` positions of ``C`` cameras (each photographs the
+            sample under every light); intensity: every light's intensity (grey or RGB).
         size: the sample's side length (same unit as the positions).
         blend: ``(height, width, M)`` blend map; :func:`blend_map` by default.
         rows: simulate only these rows (a process's part of the texture); all by default.
@@ -176,9 +221,10 @@ def simulate_capture(
     if a.shape != tuple(pos.shape[:2]) + (len(materials),):
         raise InputError(f"blend: expected shape {(height, width, len(materials))}, found {np.shape(blend)}")
     inten = jnp.broadcast_to(jnp.asarray(intensity, dtype), (3,))
-    cam = jnp.asarray(camera, dtype)
-    images = jax.lax.map(lambda light: radiance(materials, a, pos, light, inten, cam), jnp.asarray(lights, dtype))
-    return Capture(images=images, positions=pos, lights=jnp.asarray(lights, dtype), intensity=inten, camera=cam,
+    cam = _check_camera(camera, dtype)
+    lights_ = jnp.asarray(lights, dtype)
+    images = _views(cam, lambda c: jax.lax.map(lambda light: radiance(materials, a, pos, light, inten, c), lights_))
+    return Capture(images=images, positions=pos, lights=lights_, intensity=inten, camera=cam,
                    blend=jnp.asarray(a, dtype), height=int(height), width=int(width), size=float(size),
                    row0=int(rows.start))
 
@@ -193,23 +239,35 @@ def radiance(brdf, blend, positions, light, intensity, camera) -> Float[Array, "
     return f * e * jnp.maximum(cos, 0.0)[..., None]
 
 
-def relight(model, capture: Capture, light: ArrayLike, intensity: float | ArrayLike | None = None) -> Array:
+def relight(model, capture: Capture, light: ArrayLike, intensity: float | ArrayLike | None = None,
+            camera: ArrayLike | None = None) -> Array:
     """Render a fitted per-texel model (a :class:`polyjax.PolynomialBRDF` of batch ``(h, W, 3)``) under a new
-    point light, with the capture's camera: ``max(f, 0) E cos(theta_u)`` at each texel's own directions, as
-    the renderer transports light. Returns ``(h, W, 3)`` radiance."""
+    point light: ``max(f, 0) E cos(theta_u)`` at each texel's own directions, as the renderer transports light.
+
+    Args:
+        camera: ``(3,)`` or ``(C, 3)``; the capture's camera(s) by default.
+
+    Returns:
+        ``(h, W, 3)`` radiance, or ``(C, h, W, 3)`` with ``C`` cameras.
+    """
     inten = capture.intensity if intensity is None else jnp.broadcast_to(jnp.asarray(intensity), (3,))
+    dtype = capture.positions.dtype
+    cam = capture.camera if camera is None else _check_camera(camera, dtype)
 
     def per_texel(u, v):  # u, v (h, W, 3): each texel's model at its own directions
         f = jax.vmap(jax.vmap(lambda m, uu, vv: m(uu, vv)))(model, u, v)
         return jnp.maximum(f, 0.0)
 
-    return radiance(per_texel, None, capture.positions, jnp.asarray(light, capture.positions.dtype), inten,
-                    capture.camera)
+    light = jnp.asarray(light, dtype)
+    return _views(cam, lambda c: radiance(per_texel, None, capture.positions, light, inten, c))
 
 
 def photograph(materials: Sequence[BRDFFn], capture: Capture, light: ArrayLike,
-               intensity: float | ArrayLike | None = None) -> Array:
-    """The simulated photograph ``(h, W, 3)`` of the capture's sample (its true blend) under a new light."""
+               intensity: float | ArrayLike | None = None, camera: ArrayLike | None = None) -> Array:
+    """The simulated photograph ``(h, W, 3)`` of the capture's sample (its true blend) under a new light, by the
+    capture's camera or ``camera`` (``(C, h, W, 3)`` with ``C`` cameras)."""
     inten = capture.intensity if intensity is None else jnp.broadcast_to(jnp.asarray(intensity), (3,))
-    return radiance(list(materials), capture.blend, capture.positions, jnp.asarray(light, capture.positions.dtype),
-                    inten, capture.camera)
+    dtype = capture.positions.dtype
+    cam = capture.camera if camera is None else _check_camera(camera, dtype)
+    light = jnp.asarray(light, dtype)
+    return _views(cam, lambda c: radiance(list(materials), capture.blend, capture.positions, light, inten, c))

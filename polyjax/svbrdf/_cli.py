@@ -20,16 +20,37 @@ def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
     return vals
 
 
+def _cameras(text: str | None):
+    """``--cameras``: None (the default camera), an integer ``C`` or ``x,y,z;x,y,z...``."""
+    from .._errors import InputError
+    from ._capture import spread_cameras
+
+    if text is None:
+        return None
+    if text.strip().isdigit():
+        if int(text) < 1:
+            raise InputError(f"--cameras: expected at least one camera, found {text!r}")
+        return spread_cameras(int(text))
+    try:
+        return [_floats(t, 3, "--cameras") for t in text.split(";")]
+    except InputError:
+        raise InputError(f"--cameras: expected an integer or x,y,z[;x,y,z...], found {text!r}") from None
+
+
 def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "svbrdf", parents=list(parents), help="simulate an SVBRDF capture, fit every texel, write texture shards",
         description="Simulate photographs of a flat sample whose texels blend neural MERL materials, under point "
-        "lights and a fixed camera (direct evaluation of f(u, v) E cos(theta_u) per texel); fit a polynomial BRDF "
+        "lights and one fixed camera or several (--cameras) (direct evaluation of f(u, v) E cos(theta_u) per "
+        "texel); fit a polynomial BRDF "
         "to every texel in closed form; write the coefficient textures (one .npz and/or one multi-channel OpenEXR "
         "image per shard, and manifest.json); "
         "re-render under a new light and report the PSNR against the simulated photograph there.")
     p.add_argument("--size", type=int, default=64, help="texels per side (default 64)")
     p.add_argument("--lights", type=int, default=48, help="number of point lights of the capture (default 48)")
+    p.add_argument("--cameras", default=None,
+                   help="camera positions: an integer C (C cameras spread in elevation from 70 to 15 degrees and "
+                   "in azimuth, svbrdf.spread_cameras) or x,y,z[;x,y,z...]; default one camera at 0,-1.5,2.5")
     p.add_argument("--materials", default="pink-fabric,pink-felt", help="comma-separated MERL names (neural fits)")
     p.add_argument("--variables", default="lafortune", help="explanatory variable set of the per-texel fits")
     p.add_argument("--degree", type=int, default=3, help="polynomial degree p of the per-texel fits (default 3)")
@@ -52,6 +73,7 @@ def run_svbrdf(args) -> int:
     from ._shards import FORMATS
 
     light = _floats(args.new_light, 3, "--new-light")  # argument errors before any work
+    cameras = _cameras(args.cameras)
     formats = tuple(f.strip() for f in args.format.split(","))
     if not all(f in FORMATS for f in formats) or len(set(formats)) != len(formats):
         raise InputError(f"--format: expected npz, exr or npz,exr, found {args.format!r}")
@@ -71,7 +93,8 @@ def run_svbrdf(args) -> int:
     held = {}
 
     def load_rows(start, stop):
-        cap = simulate_capture(materials, args.size, args.size, n_lights=args.lights, rows=slice(start, stop))
+        kw = {} if cameras is None else dict(camera=cameras)
+        cap = simulate_capture(materials, args.size, args.size, n_lights=args.lights, rows=slice(start, stop), **kw)
         held["capture"] = cap
         u, v, b, w = cap.observations()
         return dict(u=u, v=v, values=b, weights=w)
@@ -94,7 +117,8 @@ def run_svbrdf(args) -> int:
         sse, count, peak = parts[:, 0].sum(), parts[:, 1].sum(), parts[:, 2].max()
     psnr = float(10 * np.log10(peak**2 / (sse / count))) if sse > 0 else float("inf")
     status = np.asarray(jnp.sum(mine.status != pj.Result.OK))
-    summary = dict(texels=args.size**2, processes=jax.process_count(), devices=jax.device_count(),
+    summary = dict(texels=args.size**2, cameras=1 if cap.camera.ndim == 1 else int(cap.camera.shape[0]),
+                   processes=jax.process_count(), devices=jax.device_count(),
                    fit_seconds=t_fit, texels_per_second=args.size**2 / t_fit, psnr_new_light=psnr,
                    not_ok_local=int(status), manifest=str(manifest), materials=names)
     if jax.process_index() == 0:

@@ -11,10 +11,10 @@ def fit_capture(capture: Capture, variables: str = "lafortune", degree: int = 3,
                 lane_block: int = LANE_BLOCK, sharding=None, **options) -> PolynomialBRDF:
     r"""Fit a polynomial BRDF (equation (3)) to every texel of ``capture`` from its photographs.
 
-    Each texel is fitted alone, from its own ``K`` observations at its own light and view directions (its own
-    PCA and design; its three channels share them): :func:`polyjax.fit_polynomial` with per-lane directions,
-    weighted so that the residuals are the photographs' radiance errors (:meth:`Capture.observations`).
-    Closed form, no initial guess; differentiable like every fit.
+    Each texel is fitted alone, from its own ``K`` observations (``C K`` with ``C`` cameras) at its own light and
+    view directions (its own PCA and design; its three channels share them): :func:`polyjax.fit_polynomial` with
+    per-lane directions, weighted so that the residuals are the photographs' radiance errors
+    (:meth:`Capture.observations`). Closed form, no initial guess; differentiable like every fit.
 
     Args:
         capture: a :class:`Capture`.
