@@ -295,6 +295,18 @@ def test_texels_recover_their_material_from_several_views(multiview_fit):
     assert np.all(ratios > 0.9) and np.all(ratios <= 1.2), ratios
 
 
+@pytest.mark.data
+def test_several_views_rerender_under_new_light(multiview_fit):
+    """The multi-view fit re-rendered under new lights, seen from the one-camera capture's camera (not one of the
+    three capture views): >= 35 dB against the simulated photograph there."""
+    mats, cap, model = multiview_fit
+    for light in [(0.7, 0.9, 2.2), (-1.2, 0.8, 2.0)]:
+        image = svbrdf.relight(model, cap, light, camera=(0.0, -1.5, 2.5))
+        ref = svbrdf.photograph(mats, cap, light, camera=(0.0, -1.5, 2.5))
+        assert image.shape == (8, 8, 3)
+        assert float(pj.psnr(image, ref)) >= 35.0
+
+
 def test_several_cameras_observations_and_relight():
     """C cameras give every texel C K observations (camera-major), each camera's the same numbers as a capture by
     that camera alone; a camera given as (1, 3) is the one-camera capture; relight/photograph render from every
