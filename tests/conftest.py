@@ -64,9 +64,14 @@ def _run_compilation_cache():
 
 
 def pytest_collection_modifyitems(config, items):
-    """Long tests first (so that, files being spread over the xdist workers in this order, the longest do not
-    start last); without a data root, skip the data tests (a failure in CI)."""
-    items.sort(key=lambda item: "slow" not in item.keywords)  # stable: the order within each group is kept
+    """Files with a long test first, then the files with more tests (xdist hands whole files to its workers in this
+    order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests
+    (a failure in CI)."""
+    files: dict[str, list] = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::")[0], []).append(item)
+    order = sorted(files.values(), key=lambda its: (not any("slow" in it.keywords for it in its), -len(its)))
+    items[:] = [it for its in order for it in its]  # sorted() is stable: the order within a file is kept
     if has_data_root():
         return
     if os.environ.get("CI"):
