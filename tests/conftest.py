@@ -6,7 +6,8 @@ test is loaded, not compiled again, by another test, another worker, or a subpro
 8-device and 2-process runs inherit the folder through ``$POLYJAX_CACHE`` and JAX's ``JAX_*`` variables). Every
 program is written, however quick to compile. The user's own cache folder is never written; tests of the cache
 itself pass their own folders, and the run's folder is put back after them. ``POLYJAX_TEST_CACHE=DIR`` keeps the
-programs in ``DIR`` from one run to the next instead (a later run compiles only what changed).
+programs in ``DIR`` from one run to the next instead (a later run compiles only what changed);
+``POLYJAX_TEST_CACHE=off`` turns the cache off.
 
 In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
@@ -41,7 +42,13 @@ def pytest_configure(config):
     folder = os.environ.get(_RUN_CACHE_ENV)  # a worker: the folder its controller chose
     if "PYTEST_XDIST_WORKER" not in os.environ:  # the controller or a single process
         keep = os.environ.get(_KEEP_CACHE_ENV, "").strip()
+        if keep.lower() in ("off", "0", "no", "false", "none"):  # no cache at all (each process compiles its own)
+            os.environ["POLYJAX_CACHE"] = "off"
+            os.environ.pop(_RUN_CACHE_ENV, None)
+            return
         folder = keep or str(config._tmp_path_factory.getbasetemp() / "jax-cache")
+    elif folder is None:  # a worker of a controller that turned the cache off
+        return
     os.environ.update({
         _RUN_CACHE_ENV: folder,
         "POLYJAX_CACHE": folder,  # the command line, in-process or in a subprocess
