@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -46,3 +47,31 @@ def polynomial_data(variables: str, degree: int, n: int = 400, seed: int = 1):
     beta = rng.normal(size=k * degree + 1)
     values = np.asarray(pj.evaluate_paper_form(beta, z, degree))
     return u, v, values, beta
+
+
+class LazyModels(Mapping):
+    """Fitted models by name, fitted on first use rather than when the test module is imported.
+
+    Every pytest-xdist worker imports every test module to collect it; fits made at import would be compiled and
+    run by every worker (and by runs that deselect the module's tests). The names are known at import (for
+    ``parametrize``); ``make()`` returns the dict of models and must have exactly these names.
+    """
+
+    def __init__(self, names, make: Callable[[], dict]):
+        self._names, self._make, self._models = tuple(names), make, None
+
+    def _get(self) -> dict:
+        if self._models is None:
+            models = self._make()
+            assert tuple(models) == self._names, (tuple(models), self._names)
+            self._models = models
+        return self._models
+
+    def __getitem__(self, name):
+        return self._get()[name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)

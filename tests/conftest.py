@@ -1,4 +1,13 @@
-"""Test configuration: float64 once per process, and the measured-data root.
+"""Test configuration: float64 once per process, one compilation cache per test run, and the measured-data root.
+
+Compiled programs are shared: JAX's persistent compilation cache points at one folder per test run (``jax-cache``
+under pytest's base temporary folder, the root shared by every pytest-xdist worker), so a program compiled by one
+test is loaded, not compiled again, by another test, another worker, or a subprocess (the command line, the
+8-device and 2-process runs inherit the folder through ``$POLYJAX_CACHE`` and JAX's ``JAX_*`` variables). Every
+program is written, however quick to compile. The user's own cache folder is never written; tests of the cache
+itself pass their own folders, and the run's folder is put back after them. ``POLYJAX_TEST_CACHE=DIR`` keeps the
+programs in ``DIR`` from one run to the next instead (a later run compiles only what changed);
+``POLYJAX_TEST_CACHE=off`` turns the cache off.
 
 In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
@@ -10,9 +19,12 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
-# the command line turns JAX's persistent compilation cache on; tests that call it in-process must not write into
-# the user's cache folder (tests of the cache set their own folder)
-os.environ.setdefault("POLYJAX_CACHE", "off")
+#: the variable naming this run's cache folder, set by the controlling process and inherited by xdist workers
+_RUN_CACHE_ENV = "POLYJAX_TEST_RUN_CACHE"
+#: a folder a developer names to keep the compiled programs from one test run to the next (README, "Tests")
+_KEEP_CACHE_ENV = "POLYJAX_TEST_CACHE"
+# until pytest_configure names this run's folder: never the user's (the command line turns the cache on by default)
+os.environ["POLYJAX_CACHE"] = os.environ.get(_RUN_CACHE_ENV, "off")
 
 # the repository root, for the reference fits and the paper's numbers shared with the benchmarks
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -22,7 +34,51 @@ import pytest  # noqa: E402
 from polyjax import DATA_ENV, has_data_root  # noqa: E402
 
 
+@pytest.hookimpl(trylast=True)  # after pytest's tmp_path plugin is configured
+def pytest_configure(config):
+    """Point JAX's persistent compilation cache at this run's folder, in this process and its subprocesses."""
+    from polyjax import enable_compilation_cache
+
+    folder = os.environ.get(_RUN_CACHE_ENV)  # a worker: the folder its controller chose
+    if "PYTEST_XDIST_WORKER" not in os.environ:  # the controller or a single process
+        keep = os.environ.get(_KEEP_CACHE_ENV, "").strip()
+        if keep.lower() in ("off", "0", "no", "false", "none"):  # no cache at all (each process compiles its own)
+            os.environ["POLYJAX_CACHE"] = "off"
+            os.environ.pop(_RUN_CACHE_ENV, None)
+            return
+        folder = keep or str(config._tmp_path_factory.getbasetemp() / "jax-cache")
+    elif folder is None:  # a worker of a controller that turned the cache off
+        return
+    os.environ.update({
+        _RUN_CACHE_ENV: folder,
+        "POLYJAX_CACHE": folder,  # the command line, in-process or in a subprocess
+        "JAX_COMPILATION_CACHE_DIR": folder,  # plain ``python -c`` subprocesses (8 devices, 2 processes)
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+    })
+    enable_compilation_cache(folder)
+
+
+@pytest.fixture(autouse=True)
+def _run_compilation_cache():
+    """Put this run's cache folder back after a test that pointed the cache elsewhere (tests of the cache)."""
+    yield
+    folder = os.environ.get(_RUN_CACHE_ENV)
+    if folder is not None and jax.config.jax_compilation_cache_dir != folder:
+        from polyjax import enable_compilation_cache
+
+        enable_compilation_cache(folder)
+
+
 def pytest_collection_modifyitems(config, items):
+    """Files with a long test first, then the files with more tests (xdist hands whole files to its workers in this
+    order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests
+    (a failure in CI)."""
+    files: dict[str, list] = {}
+    for item in items:
+        files.setdefault(item.nodeid.split("::")[0], []).append(item)
+    order = sorted(files.values(), key=lambda its: (not any("slow" in it.keywords for it in its), -len(its)))
+    items[:] = [it for its in order for it in its]  # sorted() is stable: the order within a file is kept
     if has_data_root():
         return
     if os.environ.get("CI"):

@@ -38,9 +38,10 @@ def test_finite_at_grazing_and_degenerate_directions(name):
     below = jnp.array([0.0, 0.6, -0.8])
     u = jnp.stack([z, graz, graz, graz, below, z, jnp.array([0.6, 0.0, 0.8])])
     v = jnp.stack([z, -graz, graz, z, z, below, jnp.array([-0.6, 0.0, -0.8])])  # includes u = -v
-    f = m.evaluate(p, u, v)
+    # compiled, as in every fit (one program each rather than one per operation, op by op)
+    f = jax.jit(m.evaluate)(p, u, v)
     assert f.shape == (7,) and bool(jnp.all(jnp.isfinite(f)))
-    g = jax.jacfwd(lambda r: m.evaluate(m.to_params(r), u, v))(m.to_raw(p))
+    g = jax.jit(jax.jacfwd(lambda r: m.evaluate(m.to_params(r), u, v)))(m.to_raw(p))
     assert bool(jnp.all(jnp.isfinite(g)))
 
 

@@ -15,6 +15,7 @@ import pytest
 import polyjax as pj
 import polyjax.export as ex
 
+from _problems import LazyModels
 from _sampling_problems import GRAZING, NORMAL, OBLIQUE, TABLE, cook_torrance, glossy_polynomial, neural, ward
 
 GLSLANG = shutil.which("glslangValidator")
@@ -50,7 +51,8 @@ def _models():
     return out
 
 
-MODELS = _models()
+MODELS = LazyModels(("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley", "monomial", "interactions",
+                     "grey"), _models)  # fitted when first used, not at collection
 
 
 def _directions(n=4000, seed=0):

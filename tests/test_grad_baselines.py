@@ -48,6 +48,7 @@ def _normalised(args, i):
 
 
 @pytest.mark.data
+@pytest.mark.slow  # a forward and a reverse derivative compiled per argument: 1-2 minutes on 2 loaded cores
 @pytest.mark.parametrize("name, which", [("ward", (0, 1, 2, 3)), ("cook-torrance", (0, 1))])
 def test_jvp_and_grad_match_finite_differences(curet, name, which):
     # Cook-Torrance's shadowing term min(1, 2 (n.h)(n.u) / (v.h)) has a kink within 4e-7 of two CUReT samples

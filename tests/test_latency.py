@@ -56,7 +56,8 @@ def test_cli_cache_is_hit_by_a_second_process(tmp_path):
 def test_import_leaves_jax_config_alone():
     code = "import jax, polyjax; print(jax.config.jax_compilation_cache_dir)"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
-                         env=dict(os.environ, PYTHONPATH=str(ROOT)))
+                         env={**{k: v for k, v in os.environ.items() if not k.startswith("JAX_")},
+                              "PYTHONPATH": str(ROOT)})  # without the test run's JAX_COMPILATION_CACHE_DIR
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "None"
 

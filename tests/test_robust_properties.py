@@ -2,6 +2,8 @@
 symmetric variable sets, and stable PCA rotation and sign conventions. Shapes are fixed so that
 every example reuses one compiled fit."""
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,7 +11,7 @@ from hypothesis import strategies as st
 
 import polyjax as pj
 
-from _problems import SYMMETRIC_SETS, polynomial_data, random_hemisphere
+from _problems import SYMMETRIC_SETS, LazyModels, polynomial_data, random_hemisphere
 
 N = 80
 SETTINGS = settings(max_examples=20, deadline=None, derandomize=True)
@@ -21,7 +23,10 @@ def _fit(u, v, b, variables="lafortune"):
     return pj.fit_polynomial(u, v, b, variables=variables, degree=4, cutoff_deg=80.0)
 
 
-REF = _fit(U, V, B)
+@functools.cache
+def _ref():
+    """The reference fit, made by the first test that needs it (not at collection, in every xdist worker)."""
+    return _fit(U, V, B)
 
 
 @SETTINGS
@@ -29,9 +34,9 @@ REF = _fit(U, V, B)
 def test_fit_invariant_to_sample_order(perm):
     perm = np.asarray(perm)
     m = _fit(U[perm], V[perm], B[perm])
-    np.testing.assert_allclose(np.asarray(m.coefficients), np.asarray(REF.coefficients), rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(np.asarray(m.rotation), np.asarray(REF.rotation), rtol=0, atol=1e-12)
-    assert float(m.l2) == pytest.approx(float(REF.l2), rel=1e-10)
+    np.testing.assert_allclose(np.asarray(m.coefficients), np.asarray(_ref().coefficients), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(m.rotation), np.asarray(_ref().rotation), rtol=0, atol=1e-12)
+    assert float(m.l2) == pytest.approx(float(_ref().l2), rel=1e-10)
 
 
 @SETTINGS
@@ -39,14 +44,15 @@ def test_fit_invariant_to_sample_order(perm):
 def test_fitting_c_times_b_gives_c_times_the_coefficients(log_c, negative):
     c = (-1.0 if negative else 1.0) * 10.0**log_c
     m = _fit(U, V, c * B)
-    scale = abs(c) * np.max(np.abs(np.asarray(REF.coefficients)))
-    np.testing.assert_allclose(np.asarray(m.coefficients), c * np.asarray(REF.coefficients),
+    scale = abs(c) * np.max(np.abs(np.asarray(_ref().coefficients)))
+    np.testing.assert_allclose(np.asarray(m.coefficients), c * np.asarray(_ref().coefficients),
                                rtol=1e-9, atol=1e-12 * scale)
-    assert float(m.l2) == pytest.approx(abs(c) * float(REF.l2), rel=1e-8, abs=1e-14 * abs(c))
+    assert float(m.l2) == pytest.approx(abs(c) * float(_ref().l2), rel=1e-8, abs=1e-14 * abs(c))
 
 
-MODELS = {s: pj.fit_polynomial(*polynomial_data("lafortune", 3)[:2], polynomial_data("lafortune", 3)[2] + 0.2,
-                               variables=s, degree=5) for s in SYMMETRIC_SETS}
+MODELS = LazyModels(SYMMETRIC_SETS, lambda: {
+    s: pj.fit_polynomial(*polynomial_data("lafortune", 3)[:2], polynomial_data("lafortune", 3)[2] + 0.2, variables=s,
+                         degree=5) for s in SYMMETRIC_SETS})
 
 
 @SETTINGS
