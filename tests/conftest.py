@@ -6,8 +6,8 @@ test is loaded, not compiled again, by another test, another worker, or a subpro
 8-device and 2-process runs inherit the folder through ``$POLYJAX_CACHE`` and JAX's ``JAX_*`` variables). Every
 program is written, however quick to compile. The user's own cache folder is never written; tests of the cache
 itself pass their own folders, and the run's folder is put back after them. ``POLYJAX_TEST_CACHE=DIR`` keeps the
-programs in ``DIR`` from one run to the next instead (a later run compiles only what changed);
-``POLYJAX_TEST_CACHE=off`` turns the cache off.
+programs in ``DIR`` from one run to the next instead (not to be used for now: a second run on a folder filled by a
+first one stalled, see README); ``POLYJAX_TEST_CACHE=off`` turns the cache off.
 
 In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
