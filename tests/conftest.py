@@ -1,13 +1,13 @@
-"""Test configuration: float64 once per process, one compilation cache per test run, and the measured-data root.
+"""Test configuration: float64 once per process, the compilation cache (off unless asked for), and the data root.
 
-Compiled programs are shared: JAX's persistent compilation cache points at one folder per test run (``jax-cache``
-under pytest's base temporary folder, the root shared by every pytest-xdist worker), so a program compiled by one
-test is loaded, not compiled again, by another test, another worker, or a subprocess (the command line, the
-8-device and 2-process runs inherit the folder through ``$POLYJAX_CACHE`` and JAX's ``JAX_*`` variables). Every
-program is written, however quick to compile. The user's own cache folder is never written; tests of the cache
-itself pass their own folders, and the run's folder is put back after them. ``POLYJAX_TEST_CACHE=DIR`` keeps the
-programs in ``DIR`` from one run to the next instead (not to be used for now: a second run on a folder filled by a
-first one stalled, see README); ``POLYJAX_TEST_CACHE=off`` turns the cache off.
+JAX's persistent compilation cache is off in the tests by default: each process compiles its own programs. With it on
+(one folder per run shared by the pytest-xdist workers and their subprocesses) a CI run crashed in JAX's cache write
+(a segmentation fault in ``put_executable_and_time``, serialising an executable) and then stalled until its time
+limit, while measured gains were small (one file: 61 s against 85 s once, 48 s against 43 s the next time).
+``POLYJAX_TEST_CACHE=run`` turns the shared per-run folder back on (``jax-cache`` under pytest's base temporary
+folder; subprocesses inherit it through ``$POLYJAX_CACHE`` and JAX's ``JAX_*`` variables), ``POLYJAX_TEST_CACHE=DIR``
+keeps the programs in ``DIR`` from one run to the next. The user's own cache folder is never written; tests of the
+cache itself pass their own folders, and the run's folder is put back after them.
 
 In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
@@ -21,7 +21,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 #: the variable naming this run's cache folder, set by the controlling process and inherited by xdist workers
 _RUN_CACHE_ENV = "POLYJAX_TEST_RUN_CACHE"
-#: a folder a developer names to keep the compiled programs from one test run to the next (README, "Tests")
+#: "run" (one folder per test run) or a folder a developer names to keep compiled programs between runs (README)
 _KEEP_CACHE_ENV = "POLYJAX_TEST_CACHE"
 # until pytest_configure names this run's folder: never the user's (the command line turns the cache on by default)
 os.environ["POLYJAX_CACHE"] = os.environ.get(_RUN_CACHE_ENV, "off")
@@ -42,11 +42,11 @@ def pytest_configure(config):
     folder = os.environ.get(_RUN_CACHE_ENV)  # a worker: the folder its controller chose
     if "PYTEST_XDIST_WORKER" not in os.environ:  # the controller or a single process
         keep = os.environ.get(_KEEP_CACHE_ENV, "").strip()
-        if keep.lower() in ("off", "0", "no", "false", "none"):  # no cache at all (each process compiles its own)
+        if keep.lower() in ("", "off", "0", "no", "false", "none"):  # the default: each process compiles its own
             os.environ["POLYJAX_CACHE"] = "off"
             os.environ.pop(_RUN_CACHE_ENV, None)
             return
-        folder = keep or str(config._tmp_path_factory.getbasetemp() / "jax-cache")
+        folder = str(config._tmp_path_factory.getbasetemp() / "jax-cache") if keep.lower() == "run" else keep
     elif folder is None:  # a worker of a controller that turned the cache off
         return
     os.environ.update({
