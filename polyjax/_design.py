@@ -42,20 +42,26 @@ def fitted_scaling(x: Float[Array, "n k"], keep: Bool[Array, " n"], basis: str =
     components ``(Z - centre) / halfwidth`` from which every design row is built."""
     pca = fit_pca(x, keep)
     z = pca(x)
-    k = x.shape[-1]
     big = jnp.finfo(x.dtype).max
     lo = jnp.min(jnp.where(keep[:, None], z, big), axis=0)
     hi = jnp.max(jnp.where(keep[:, None], z, -big), axis=0)
-    any_kept = jnp.any(keep)
+    x_mag = jnp.max(jnp.where(keep[:, None], jnp.abs(x), 0.0))
+    centre, hw = range_scaling(lo, hi, jnp.any(keep), x_mag, basis)
+    return pca, centre, hw, (z - centre) / hw
+
+
+def range_scaling(lo: Float[Array, " k"], hi: Float[Array, " k"], any_kept, x_mag, basis: str = "legendre"):
+    """``(centre, halfwidth)`` of :func:`fitted_scaling` from the range ``[lo, hi]`` of the components over the kept
+    samples (``any_kept``: whether there is one) and the largest ``|x|`` there, ``x_mag``."""
+    k = lo.shape[0]
     lo = jnp.where(any_kept, lo, -1.0)
     hi = jnp.where(any_kept, hi, 1.0)
     hw = 0.5 * (hi - lo)
-    x_mag = jnp.max(jnp.where(keep[:, None], jnp.abs(x), 0.0))
-    flat = ~(hw > 1e3 * jnp.finfo(x.dtype).eps * x_mag)
+    flat = ~(hw > 1e3 * jnp.finfo(lo.dtype).eps * x_mag)
     if basis == "legendre":
         centre = 0.5 * (lo + hi)
     else:
-        centre = jnp.zeros((k,), x.dtype)
-        hw = jnp.ones((k,), x.dtype)
+        centre = jnp.zeros((k,), lo.dtype)
+        hw = jnp.ones((k,), lo.dtype)
     hw = jnp.where(flat, jnp.inf, hw)
-    return pca, centre, hw, (z - centre) / hw
+    return centre, hw

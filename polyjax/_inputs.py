@@ -212,6 +212,17 @@ def _unit_directions(u, v):
     return out
 
 
+def remember_unit_directions(u, v, valid) -> None:
+    """Record that the concrete device arrays ``u``, ``v`` ``(n, 3)`` are unit vectors already (``valid (n,)``
+    where both have a direction), as :func:`_unit_directions` would return them: a loader that builds a grid of
+    directions from angles (unit to rounding; the MERL grid) calls it, so that the first fit on the grid skips
+    the normalising pass over its million directions. Replaces the pair remembered before."""
+    try:
+        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), (u, v, valid))
+    except TypeError:  # an array type without weak references: not remembered
+        _UNIT_MEMO.pop("pair", None)
+
+
 def _known_pair(u, v) -> bool:
     """Whether ``u``, ``v`` are the pair :func:`_unit_directions` remembers (already checked and normalised)."""
     hit = _UNIT_MEMO.get("pair")

@@ -64,11 +64,19 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
     mean = jnp.sum(m[:, None] * x, axis=0) / jnp.maximum(cnt, 1.0)
     xc = (x - mean) * m[:, None]
     cov = (xc.T @ xc) / jnp.maximum(cnt - 1.0, 1.0)
+    return pca_from_covariance(mean, cov)
+
+
+def pca_from_covariance(mean: Float[Array, " k"], cov: Float[Array, "k k"]) -> PCA:
+    """The :class:`PCA` of samples with this mean and covariance (the eigen-decomposition and sign rule of
+    :func:`fit_pca`, which calls it; the streamed fit gives it moments accumulated over the samples' ``(k, n)``
+    layout)."""
+    k = mean.shape[0]
     evals, evecs = eigh(cov)
     evals = evals[::-1]
     evecs = evecs[:, ::-1]
     mag = jnp.abs(evecs)
-    tied = mag >= jnp.max(mag, axis=0, keepdims=True) - jnp.sqrt(jnp.finfo(x.dtype).eps)
+    tied = mag >= jnp.max(mag, axis=0, keepdims=True) - jnp.sqrt(jnp.finfo(cov.dtype).eps)
     idx = jnp.argmax(tied, axis=0)  # the first (near-)largest entry of each column
     sign = jnp.sign(evecs[idx, jnp.arange(k)])
     sign = jnp.where(sign == 0, 1.0, sign)

@@ -41,15 +41,22 @@ import jax
 import jax.numpy as jnp
 
 from ._basis import exponents
-from ._design import fitted_scaling
+from ._design import range_scaling
 from ._linalg import svd
 from ._lstsq import _solve_svd
+from ._pca import pca_from_covariance
 
 #: shared-design fits with at least this many samples (and 8 times more than columns plus right-hand sides)
 #: are streamed
 STREAM_ROWS = 100_000
 #: rows per block: the block's design (``m x BLOCK``) stays in the CPU's cache
 BLOCK = 8192
+#: the preconditioning factor ``R_1`` of CholeskyQR2 is taken from every this many-th row (its Gram matrix costs
+#: this fraction of a pass; at least 1024 rows are sampled)
+PRECONDITION_STRIDE = 16
+#: ... and a further orthogonalising pass is made when ``Q_1 = A E_1^{-1} R_1^{-1}`` is further from orthogonal
+#: than this (the condition number of ``R_2 = chol(Q_1^T Q_1)``; 1 for an orthogonal ``Q_1``)
+PRECONDITION_CONDITION = 4.0
 #: the one-pass solution (semi-normal equations, step 3) is kept when the equilibrated design's condition number
 #: is at most this (its error bound ``kappa^2 eps`` is then within this factor of a QR solve's ``kappa eps``,
 #: below 1e-13 in float64) ...
@@ -119,67 +126,148 @@ def _rows(t_b, sw_b, max_degree, basis, interactions):
     return _design_t(t_b, max_degree, basis, interactions) * sw_b[None]
 
 
-def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, block=None):
+def _scaled_components(x, keep, pos, basis):
+    """The PCA and affine scaling of :func:`polyjax.fitted_design` computed on the ``(k, n)`` layout (each
+    component's samples contiguous): ``(pca, centre, halfwidth, t (k, n))``, ``t`` zero where ``pos`` is False.
+
+    Two reductions over ``x`` (the mean, then the centred covariance, as :func:`polyjax.fit_pca`: no raw second
+    moments), one over the components (their range) and the pass writing ``t``; on the ``(n, k)`` layout every
+    such step ran at a fraction of the memory's speed."""
+    xt = x.T  # (k, n)
+    kf = keep.astype(x.dtype)
+    cnt = jnp.sum(kf)
+    mean = jnp.sum(xt * kf[None], axis=1) / jnp.maximum(cnt, 1.0)
+    xc = (xt - mean[:, None]) * kf[None]
+    k = xt.shape[0]
+    # sums of products row by row (XLA's dot of a (k, n) by an (n, k) array ran at a tenth of this speed)
+    cov = jnp.stack([jnp.stack([jnp.sum(xc[i] * xc[j]) for j in range(k)]) for i in range(k)])
+    pca = pca_from_covariance(mean, cov / jnp.maximum(cnt - 1.0, 1.0))
+    xm = xt - mean[:, None]
+    z = jnp.stack([sum(pca.rotation[j, i] * xm[j] for j in range(k)) for i in range(k)])  # (k, n): Z^T
+    big = jnp.finfo(x.dtype).max
+    lo = jnp.min(jnp.where(keep[None], z, big), axis=1)
+    hi = jnp.max(jnp.where(keep[None], z, -big), axis=1)
+    x_mag = jnp.max(jnp.where(keep[None], jnp.abs(xt), 0.0))
+    centre, hw = range_scaling(lo, hi, jnp.any(keep), x_mag, basis)
+    t = jnp.where(pos[None], (z - centre[:, None]) / hw[:, None], 0.0)
+    return pca, centre, hw, t
+
+
+def _equilibrated_cholesky(g, act):
+    """Column norms ``E`` (from the diagonal of the Gram matrix ``g``) and ``R_1 = chol(E^{-1} g E^{-1})`` over the
+    active columns (a unit diagonal elsewhere), with whether the factor succeeded."""
+    dtype = g.dtype
+    m = g.shape[0]
+    raw = jnp.sqrt(jnp.where(act, jnp.diagonal(g), 0.0))
+    scale = jnp.where(raw > 0, raw, 1.0)
+    pad = jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype))
+    r1, ok = _chol_upper(jnp.where(act[:, None] & act[None, :], g / (scale[:, None] * scale[None, :]), 0.0) + pad)
+    return scale, jnp.where(ok, r1, jnp.eye(m, dtype=dtype)), ok
+
+
+def _preconditioner(t, sw, active, rows, block, stride):
+    """``(E_1, R_1, ok)`` per degree: the equilibration and Cholesky factor of the Gram matrix of every
+    ``stride``-th row (a sample of the rows, ``1 / stride`` of the work); of every row when that factor fails
+    (or ``stride`` is 1). Only a preconditioner: :func:`_orthogonal_pass` then factors ``A E_1^{-1} R_1^{-1}``
+    over every row."""
+    n = t.shape[1]
+
+    def gram(t_b, sw_b):
+        a = rows(t_b, sw_b)  # (m, B)
+        return jnp.matmul(a, a.T, precision=_HI)
+
+    def full():
+        return _stream_sum(gram, n, block, (t, sw), (1, 0))
+
+    def factors(g):
+        return jax.vmap(_equilibrated_cholesky, in_axes=(None, 0))(g, active)
+
+    if stride <= 1:
+        return factors(full())
+    scale, r1, ok = factors(gram(t[:, ::stride], sw[::stride]) * stride)
+    return jax.lax.cond(jnp.all(ok), lambda: (scale, r1, ok), lambda: factors(full()))
+
+
+def _orthogonal_pass(t, sw, scale, r1inv, rows, block):
+    """One pass over the rows: ``C = Q_1^T Q_1`` per degree, ``Q_1 = A E_1^{-1} R_1^{-1}`` built block by block,
+    and the squared column norms ``diag(A^T A)``."""
+
+    def body(t_b, sw_b):
+        a = rows(t_b, sw_b)  # (m, B)
+        q1 = jnp.einsum("mb,dm,dmj->djb", a, 1.0 / scale, r1inv, precision=_HI)  # (D, m, B)
+        return jnp.einsum("dib,djb->dij", q1, q1, precision=_HI), jnp.sum(a * a, axis=1)
+
+    return _stream_sum(body, t.shape[1], block, (t, sw), (1, 0))
+
+
+def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, block=None, stride=None):
     """What a streamed fit needs of the samples alone (not of the values): steps 1 and 2 of the module docstring.
 
     Args:
         x: ``(n, k)`` explanatory variables; ``wl``, ``wc2l``: ``(n,)`` the weights ``w`` and ``w cos^2 theta_u``
             (0 for dropped samples); ``active``: ``(D, m)`` columns per degree.
         max_degree, basis, interactions: as in :func:`polyjax.fit_polynomial`.
-        block: rows per block (default :data:`BLOCK`).
+        block: rows per block (default :data:`BLOCK`); stride: the preconditioner's sample of the rows (default
+            :data:`PRECONDITION_STRIDE`).
 
     Returns:
         A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``sqrt(w cos^2 theta_u)``, ``G``, and
-        per degree the column norms ``E``, ``R_1^{-1}``, ``R_2``, the SVD of ``R = R_2 R_1`` and whether both
-        Cholesky factors succeeded. The same for every material on one grid: :func:`polyjax.fit_polynomial`
+        per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R`` and whether
+        the Cholesky factors succeeded. The same for every material on one grid: :func:`polyjax.fit_polynomial`
         keeps the last one.
     """
     block = BLOCK if block is None else int(block)
-    n = x.shape[0]
+    stride = PRECONDITION_STRIDE if stride is None else int(stride)
     dtype = x.dtype
     keep = wl > 0
-    pca, centre, hw, t = fitted_scaling(x, keep, basis)
     pos = wc2l > 0
-    t = jnp.where(pos[None], t.T, 0.0)  # (k, n): each component's samples contiguous; finite where dropped
+    pca, centre, hw, t = _scaled_components(x, keep, pos, basis)
     sw = jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
     rows = lambda t_b, sw_b: _rows(t_b, sw_b, max_degree, basis, interactions)  # noqa: E731
+    scale1, r1, ok1 = _preconditioner(t, sw, active, rows, block, max(1, min(stride, t.shape[1] // 1024)))
+    eye = jnp.eye(r1.shape[-1], dtype=dtype)
+    r1inv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r1, active)
+    c, colsq = _orthogonal_pass(t, sw, scale1, r1inv, rows, block)
 
-    def gram(t_b, sw_b):
-        a = rows(t_b, sw_b)  # (m, B)
-        return jnp.matmul(a, a.T, precision=_HI)
+    def second(act, c):
+        r2, ok = _chol_upper(c + jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype)))
+        return jnp.where(ok, r2, eye), ok
 
-    g = _stream_sum(gram, n, block, (t, sw), (1, 0))
-    m = g.shape[0]
-    eye = jnp.eye(m, dtype=dtype)
+    r2, ok2 = jax.vmap(second)(active, c)
+    # a sample that preconditions badly (Q_1 far from orthogonal) gets one more pass, with R = R_2 R_1 as the
+    # preconditioner: the factor is then a CholeskyQR2 of the already well-conditioned A E_1^{-1} R^{-1}
+    again = ~jnp.all(_condition_upper(r2) <= PRECONDITION_CONDITION)
 
-    def first(act):
-        both = act[:, None] & act[None, :]
-        raw = jnp.sqrt(jnp.where(act, jnp.diagonal(g), 0.0))
-        scale = jnp.where(raw > 0, raw, 1.0)
-        pad = jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype))
-        r1, ok1 = _chol_upper(jnp.where(both, g / (scale[:, None] * scale[None, :]), 0.0) + pad)
-        r1 = jnp.where(ok1, r1, eye)
-        r1inv = jax.scipy.linalg.solve_triangular(r1, eye, lower=False)
-        return scale, r1, r1inv * act[:, None], pad, ok1
+    def refine():
+        r = jnp.einsum("dij,djk->dik", r2, r1, precision=_HI)
+        rinv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r, active)
+        c3, _ = _orthogonal_pass(t, sw, scale1, rinv, rows, block)
+        r3, ok3 = jax.vmap(second)(active, c3)
+        return r, r3, ok3
 
-    scale, r1, r1inv, pad, ok1 = jax.vmap(first)(active)
+    r1, r2, ok2 = jax.lax.cond(again & jnp.all(ok2), refine, lambda: (r1, r2, ok2))
+    # the same factor in the exact column norms E of A (those of the dense fit): A E^{-1} = Q R_2 R_1 E_1 E^{-1}
+    scale = jax.vmap(lambda act: jnp.where(act & (colsq > 0), jnp.sqrt(jnp.where(act, colsq, 1.0)), 1.0))(active)
+    r1 = r1 * (scale1 / scale)[:, None, :]
+    r1inv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r1, active)
 
-    def second(t_b, sw_b):
-        q1 = jnp.einsum("mb,dm,dmj->djb", rows(t_b, sw_b), 1.0 / scale, r1inv, precision=_HI)  # (D, m, B)
-        return jnp.einsum("dib,djb->dij", q1, q1, precision=_HI)
+    def finish(act, r1, r2, e):
+        r = jnp.where(act[:, None] & act[None, :], r2 @ r1, 0.0)
+        uu, s, vt = svd(r)
+        return uu, s, vt, (r.T @ r) * e[:, None] * e[None, :]  # G = A^T A = E R^T R E
 
-    c = _stream_sum(second, n, block, (t, sw), (1, 0))
-
-    def finish(act, r1, c, pad):
-        r2, ok2 = _chol_upper(c + pad)
-        r2 = jnp.where(ok2, r2, eye)
-        uu, s, vt = svd(jnp.where(act[:, None] & act[None, :], r2 @ r1, 0.0))
-        return r2, uu, s, vt, ok2
-
-    r2, uu, s, vt, ok2 = jax.vmap(finish)(active, r1, c, pad)
-    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw, g=g,
-                den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
+    uu, s, vt, g = jax.vmap(finish)(active, r1, r2, scale)
+    g = g[jnp.argmax(jnp.sum(active, axis=1))]  # every column active: the degree p itself
+    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw,
+                g=g, den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
                 ok=jnp.all(ok1) & jnp.all(ok2))
+
+
+def _condition_upper(r):
+    """The condition numbers of the triangular factors ``r (D, m, m)`` (1 for the factor of an orthogonal
+    ``Q_1``)."""
+    s = jax.vmap(lambda a: svd(a)[1])(r)
+    return s[:, 0] / s[:, -1]
 
 
 def _solve(geo, act_all, atb, n, rcond):

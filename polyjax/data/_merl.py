@@ -197,12 +197,35 @@ def merl_bin_weights(resolution: Sequence[int] = MERL_RESOLUTION) -> np.ndarray:
     return w.ravel()
 
 
+def _grid_directions(resolution: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rusinkiewicz_to_directions` of every bin centre, in file order, by the grid's separable form: the sines
+    and cosines of the ``N_h + N_d + N_p`` bin angles, then the products of :func:`rusinkiewicz_to_directions`
+    (the same operations on the same numbers, so the same bits) written straight into the ``(N, 3)`` arrays, with
+    no full-size angle or temporary arrays (a tenth of the time of the elementwise form)."""
+    nh, nd, npd = resolution
+    th = (np.arange(nh) / nh) ** 2 * (np.pi / 2)
+    td = np.arange(nd) / nd * (np.pi / 2)
+    pd = np.arange(npd) / npd * np.pi
+    c, s = np.cos(th)[:, None, None], np.sin(th)[:, None, None]
+    dx = (np.sin(td)[:, None] * np.cos(pd)[None, :])[None]  # (1, N_d, N_p)
+    dy = (np.sin(td)[:, None] * np.sin(pd)[None, :])[None]
+    dz = np.broadcast_to(np.cos(td)[None, :, None], dx.shape)
+    u = np.empty((nh, nd, npd, 3))
+    v = np.empty((nh, nd, npd, 3))
+    np.add(dx * c, dz * s, out=u[..., 0])
+    np.copyto(u[..., 1], np.broadcast_to(dy, u.shape[:3]))
+    np.subtract(dz * c, dx * s, out=u[..., 2])
+    np.add(-dx * c, dz * s, out=v[..., 0])
+    np.copyto(v[..., 1], np.broadcast_to(-dy, v.shape[:3]))
+    np.add(dz * c, dx * s, out=v[..., 2])
+    return u.reshape(-1, 3), v.reshape(-1, 3)
+
+
 @functools.lru_cache(maxsize=4)
 def merl_grid(resolution: tuple[int, int, int] = MERL_RESOLUTION):
     """``(u, v, weights, above)`` for every bin in file order; ``above`` is True where both directions
     are above the horizon (``cos theta_u > 0`` and ``cos theta_v > 0``). Cached; arrays are read-only."""
-    th, td, pd = merl_bin_angles(resolution)
-    u, v = rusinkiewicz_to_directions(th, td, pd)
+    u, v = _grid_directions(_check_resolution(resolution))
     w = merl_bin_weights(resolution)
     above = (u[:, 2] > 0) & (v[:, 2] > 0)
     for a in (u, v, w, above):
@@ -395,9 +418,13 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     again by identity)."""
     import jax
 
+    from .._inputs import remember_unit_directions
+
     u, v, w, above = merl_grid(resolution)
-    return tuple(jax.device_put(np.asarray(a[above], dtype_name)) for a in (u, v, w)) + (
+    grid = tuple(jax.device_put(np.asarray(a[above], dtype_name)) for a in (u, v, w)) + (
         jax.device_put(np.ones(int(above.sum()), bool)),)
+    remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
+    return grid
 
 
 @functools.lru_cache(maxsize=4)
