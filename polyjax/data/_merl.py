@@ -420,9 +420,17 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
 
     from .._inputs import remember_unit_directions
 
-    u, v, w, above = merl_grid(resolution)
-    grid = tuple(jax.device_put(np.asarray(a[above], dtype_name)) for a in (u, v, w)) + (
-        jax.device_put(np.ones(int(above.sum()), bool)),)
+    u, v, w, _ = merl_grid(resolution)
+    idx = _above_index(resolution)
+
+    def gathered(a):  # into an aligned buffer, which jax.device_put takes over without a copy
+        out = _aligned_empty((idx.size,) + a.shape[1:], dtype_name)
+        if out.dtype == a.dtype:
+            return np.take(a, idx, axis=0, out=out)
+        np.copyto(out, np.take(a, idx, axis=0))
+        return out
+
+    grid = tuple(jax.device_put(gathered(a)) for a in (u, v, w)) + (jax.device_put(np.ones(idx.size, bool)),)
     remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
     return grid
 
