@@ -11,10 +11,19 @@ and keeps only ``m x m`` (or ``m x r``) sums. With ``A = W^{1/2} D``
 Geometry (the directions and weights only, not the values; :func:`stream_geometry`, kept for every material on
 the same grid):
 
-1. ``G = A^T A``: the column norms ``E = diag(G)^{1/2}`` equilibrate it, ``R_1 = chol(E^{-1} G E^{-1})``;
-2. ``C = Q_1^T Q_1`` with ``Q_1 = A E^{-1} R_1^{-1}`` built block by block; ``R_2 = chol(C)``, ``R = R_2 R_1``
-   (CholeskyQR2, exactly the sums of :func:`polyjax._linalg.tall_qr`, accumulated in blocks) and the SVD
-   ``R = U S V^T``, which gives the rank and condition as in :func:`polyjax.weighted_lstsq`.
+0. the PCA of the explanatory variables and the scaling of its components (as :func:`polyjax.fitted_design`),
+   computed on the ``(k, n)`` layout: reductions over contiguous rows, then ``t``;
+1. a preconditioner from a sample of the rows (every :data:`PRECONDITION_STRIDE`-th one): its Gram matrix
+   ``G_s``, column norms ``E_1 = diag(G_s)^{1/2}`` and ``R_1 = chol(E_1^{-1} G_s E_1^{-1})``; from every row
+   (the first pass of CholeskyQR2) when that Cholesky factor fails;
+2. one pass over every row: ``C = Q_1^T Q_1`` with ``Q_1 = A E_1^{-1} R_1^{-1}`` built block by block, and the
+   exact column norms ``E = diag(A^T A)^{1/2}``; ``R_2 = chol(C)``, and ``A E^{-1} = Q R`` with
+   ``R = R_2 R_1 E_1 E^{-1}``. This is the second pass of CholeskyQR2 (Fukaya et al. 2014), whose accuracy
+   needs only a well-conditioned ``Q_1`` (its orthogonality error is ``O(eps cond(Q_1)^2)``), not an exact
+   ``R_1``: when ``cond(R_2) = cond(Q_1)`` exceeds :data:`PRECONDITION_CONDITION` (a sample unlike the whole),
+   the pass is made again with ``R_2 R_1`` as the preconditioner. Then the SVD ``R = U S V^T``, which gives the
+   rank and condition as in :func:`polyjax.weighted_lstsq`, and ``G = A^T A = E R^T R E``. (The first pass of
+   CholeskyQR2 over every row, which this sample replaces, cost about two thirds of this one.)
 
 Values (:func:`streamed_lane`, two passes that read ``t``, the weights and the values):
 
@@ -166,10 +175,10 @@ def _equilibrated_cholesky(g, act):
 
 
 def _preconditioner(t, sw, active, rows, block, stride):
-    """``(E_1, R_1, ok)`` per degree: the equilibration and Cholesky factor of the Gram matrix of every
-    ``stride``-th row (a sample of the rows, ``1 / stride`` of the work); of every row when that factor fails
-    (or ``stride`` is 1). Only a preconditioner: :func:`_orthogonal_pass` then factors ``A E_1^{-1} R_1^{-1}``
-    over every row."""
+    """``(E_1, R_1, ok)`` per degree and whether every row was read: the equilibration and Cholesky factor of the
+    Gram matrix of every ``stride``-th row (a sample of the rows, ``1 / stride`` of the work); of every row when
+    that factor fails (or ``stride`` is 1). Only a preconditioner: :func:`_orthogonal_pass` then factors
+    ``A E_1^{-1} R_1^{-1}`` over every row."""
     n = t.shape[1]
 
     def gram(t_b, sw_b):
@@ -183,9 +192,10 @@ def _preconditioner(t, sw, active, rows, block, stride):
         return jax.vmap(_equilibrated_cholesky, in_axes=(None, 0))(g, active)
 
     if stride <= 1:
-        return factors(full())
+        return factors(full()) + (jnp.asarray(True),)
     scale, r1, ok = factors(gram(t[:, ::stride], sw[::stride]) * stride)
-    return jax.lax.cond(jnp.all(ok), lambda: (scale, r1, ok), lambda: factors(full()))
+    return jax.lax.cond(jnp.all(ok), lambda: (scale, r1, ok, jnp.asarray(False)),
+                        lambda: factors(full()) + (jnp.asarray(True),))
 
 
 def _orthogonal_pass(t, sw, scale, r1inv, rows, block):
@@ -212,9 +222,10 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
 
     Returns:
         A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``sqrt(w cos^2 theta_u)``, ``G``, and
-        per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R`` and whether
-        the Cholesky factors succeeded. The same for every material on one grid: :func:`polyjax.fit_polynomial`
-        keeps the last one.
+        per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R``, whether
+        the Cholesky factors succeeded, the number of passes over the rows (1 to 3) and whether the preconditioner
+        came from the sample of the rows. The same for every
+        material on one grid: :func:`polyjax.fit_polynomial` keeps the last one.
     """
     block = BLOCK if block is None else int(block)
     stride = PRECONDITION_STRIDE if stride is None else int(stride)
@@ -224,7 +235,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     pca, centre, hw, t = _scaled_components(x, keep, pos, basis)
     sw = jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
     rows = lambda t_b, sw_b: _rows(t_b, sw_b, max_degree, basis, interactions)  # noqa: E731
-    scale1, r1, ok1 = _preconditioner(t, sw, active, rows, block, max(1, min(stride, t.shape[1] // 1024)))
+    scale1, r1, ok1, read_all = _preconditioner(t, sw, active, rows, block, max(1, min(stride, t.shape[1] // 1024)))
     eye = jnp.eye(r1.shape[-1], dtype=dtype)
     r1inv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r1, active)
     c, colsq = _orthogonal_pass(t, sw, scale1, r1inv, rows, block)
@@ -245,7 +256,9 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
         r3, ok3 = jax.vmap(second)(active, c3)
         return r, r3, ok3
 
-    r1, r2, ok2 = jax.lax.cond(again & jnp.all(ok2), refine, lambda: (r1, r2, ok2))
+    again = again & jnp.all(ok2)
+    r1, r2, ok2 = jax.lax.cond(again, refine, lambda: (r1, r2, ok2))
+    passes = 1 + read_all.astype(jnp.int32) + again.astype(jnp.int32)
     # the same factor in the exact column norms E of A (those of the dense fit): A E^{-1} = Q R_2 R_1 E_1 E^{-1}
     scale = jax.vmap(lambda act: jnp.where(act & (colsq > 0), jnp.sqrt(jnp.where(act, colsq, 1.0)), 1.0))(active)
     r1 = r1 * (scale1 / scale)[:, None, :]
@@ -260,7 +273,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     g = g[jnp.argmax(jnp.sum(active, axis=1))]  # every column active: the degree p itself
     return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw,
                 g=g, den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
-                ok=jnp.all(ok1) & jnp.all(ok2))
+                ok=jnp.all(ok1) & jnp.all(ok2), passes=passes, sampled=~read_all)
 
 
 def _condition_upper(r):

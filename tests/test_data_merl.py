@@ -254,3 +254,31 @@ def test_loads_in_a_row_keep_their_own_values(tmp_path):
         idx = np.flatnonzero(above & (t >= 0).any(0))
         ok = t[:, idx] >= 0
         np.testing.assert_allclose(np.asarray(m.values)[ok], t[:, idx][ok], rtol=1e-14)
+
+
+def test_grid_directions_are_the_elementwise_formula_bit_for_bit():
+    """``merl_grid`` builds the directions from the grid's separable form: the same numbers as
+    ``rusinkiewicz_to_directions`` of every bin's angles, to the last bit."""
+    u, v, _, above = pj.data.merl_grid()
+    u0, v0 = pj.data.rusinkiewicz_to_directions(*pj.data.merl_bin_angles())
+    assert np.array_equal(u, u0) and np.array_equal(v, v0)
+    assert np.array_equal(above, (u0[:, 2] > 0) & (v0[:, 2] > 0))
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1.0, atol=4e-16)
+
+
+def test_loaded_grid_directions_are_taken_as_unit(tmp_path):
+    """The loader's device directions of the full grid are remembered as unit vectors when it makes them (no
+    normalising pass in the first fit): they are, to rounding, what normalising gives."""
+    import jax.numpy as jnp
+
+    from polyjax import _inputs
+    from polyjax._geometry import safe_normalize
+    from polyjax.data import _merl
+
+    _merl._device_grid.cache_clear()  # made again by the next load, as in a fresh process
+    vals = np.zeros((3, pj.data.MERL_N_BINS))
+    m = pj.data.load_merl_binary(pj.data.write_merl_binary(tmp_path / "zero.binary", vals))
+    assert _inputs._known_pair(m.u, m.v)
+    u, v, ok = _inputs._unit_directions(m.u, m.v)
+    assert u is m.u and v is m.v and bool(jnp.all(ok))
+    np.testing.assert_allclose(np.asarray(u), np.asarray(safe_normalize(m.u)[0]), rtol=0, atol=1e-15)  # 2 ulp
