@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
+from . import _geometry_store as store
 from ._basis import BASES, n_terms, term_degrees
 from ._design import fitted_design
 from ._errors import InputError
@@ -21,7 +22,7 @@ from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._sharding import lane_sharding, shard_lanes
-from ._stream import stream_geometry, streamed_lane, use_stream
+from ._stream import stream_geometry, stream_rows, streamed_lane, use_stream
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -178,6 +179,35 @@ def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions
     return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
 
 
+@functools.partial(jax.jit, static_argnames=("variables", "cutoff_deg"))
+def _rows_kernel(inp, mean, rotation, centre, halfwidth, *, variables, cutoff_deg):
+    """The per-sample rows of a geometry kept on disk (:func:`polyjax._stream.stream_rows`), compiled alone."""
+    x = get_variables(variables).fn(inp.u, inp.v)
+    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
+    return stream_rows(x, w[0], wc2[0], mean, rotation, centre, halfwidth)
+
+
+def _kept_or_new_geometry(inp, degrees, static):
+    """:func:`_geometry_kernel`, or the geometry kept on disk for these samples and options when the compilation
+    cache is on (``polyjax/_geometry_store.py``: found by a hash of everything it depends on, checked, never
+    trusted otherwise), completed by one pass over the rows; a new geometry is written there."""
+    folder = store.store_folder()
+    if folder is None:
+        return _geometry_kernel(inp, degrees, **static)
+    key = store.geometry_key(inp, degrees, static)
+    template = jax.eval_shape(functools.partial(_geometry_kernel, **static), inp, degrees)
+    kept = store.load(folder, key, template)
+    if kept is not None:
+        rows = _rows_kernel(inp, *(kept[f] for f in ("mean", "rotation", "centre", "halfwidth")),
+                            variables=static["variables"], cutoff_deg=static["cutoff_deg"])
+        if int(rows["n_used"]) == int(kept["n_used"]) and np.allclose(rows["den"], kept["den"], rtol=1e-12, atol=0):
+            return {**{f: jnp.asarray(a) for f, a in kept.items()}, "t": rows["t"], "sw": rows["sw"],
+                    "wc2": rows["wc2"]}
+    geo = _geometry_kernel(inp, degrees, **static)
+    store.save(folder, key, geo)
+    return geo
+
+
 _GEOMETRY_MEMO: dict = {}
 
 
@@ -190,7 +220,7 @@ def _streamed_geometry(inp, degrees, **static):
     if (hit is not None and hit["key"] == key and hit["u"]() is inp.u and hit["v"]() is inp.v
             and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
         return hit["geo"]
-    geo = _geometry_kernel(inp, np.asarray(degrees, np.int32), **static)
+    geo = _kept_or_new_geometry(inp, np.asarray(degrees, np.int32), static)
     if not is_concrete(geo):
         return geo
     try:

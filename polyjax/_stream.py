@@ -151,15 +151,39 @@ def _scaled_components(x, keep, pos, basis):
     # sums of products row by row (XLA's dot of a (k, n) by an (n, k) array ran at a tenth of this speed)
     cov = jnp.stack([jnp.stack([jnp.sum(xc[i] * xc[j]) for j in range(k)]) for i in range(k)])
     pca = pca_from_covariance(mean, cov / jnp.maximum(cnt - 1.0, 1.0))
-    xm = xt - mean[:, None]
-    z = jnp.stack([sum(pca.rotation[j, i] * xm[j] for j in range(k)) for i in range(k)])  # (k, n): Z^T
+    z = _rotate(xt, pca.mean, pca.rotation)
     big = jnp.finfo(x.dtype).max
     lo = jnp.min(jnp.where(keep[None], z, big), axis=1)
     hi = jnp.max(jnp.where(keep[None], z, -big), axis=1)
     x_mag = jnp.max(jnp.where(keep[None], jnp.abs(xt), 0.0))
     centre, hw = range_scaling(lo, hi, jnp.any(keep), x_mag, basis)
-    t = jnp.where(pos[None], (z - centre[:, None]) / hw[:, None], 0.0)
-    return pca, centre, hw, t
+    return pca, centre, hw, _scale(z, centre, hw, pos)
+
+
+def _rotate(xt, mean, rotation):
+    """The principal components ``Z^T = rotation^T (X^T - mean)``, ``(k, n)``, by rows."""
+    xm = xt - mean[:, None]
+    k = xt.shape[0]
+    return jnp.stack([sum(rotation[j, i] * xm[j] for j in range(k)) for i in range(k)])
+
+
+def _scale(z, centre, hw, pos):
+    return jnp.where(pos[None], (z - centre[:, None]) / hw[:, None], 0.0)
+
+
+def _root_weights(wc2l):
+    pos = wc2l > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
+
+
+def stream_rows(x, wl, wc2l, mean, rotation, centre, halfwidth):
+    """The per-sample part of :func:`stream_geometry` given its transform (a geometry kept on disk,
+    :mod:`polyjax._geometry_store`): ``t (k, n)``, ``sqrt(w cos^2 theta_u)`` and its square, and the samples used
+    and their weight (checked against the kept geometry's)."""
+    pos = wc2l > 0
+    t = _scale(_rotate(x.T, mean, rotation), centre, halfwidth, pos)
+    sw = _root_weights(wc2l)
+    return dict(t=t, sw=sw, wc2=sw * sw, den=jnp.sum(wl), n_used=jnp.sum(wl > 0))
 
 
 def _equilibrated_cholesky(g, act):
@@ -233,7 +257,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     keep = wl > 0
     pos = wc2l > 0
     pca, centre, hw, t = _scaled_components(x, keep, pos, basis)
-    sw = jnp.where(pos, jnp.sqrt(jnp.where(pos, wc2l, 1.0)), 0.0)
+    sw = _root_weights(wc2l)
     rows = lambda t_b, sw_b: _rows(t_b, sw_b, max_degree, basis, interactions)  # noqa: E731
     scale1, r1, ok1, read_all = _preconditioner(t, sw, active, rows, block, max(1, min(stride, t.shape[1] // 1024)))
     eye = jnp.eye(r1.shape[-1], dtype=dtype)

@@ -86,3 +86,113 @@ def test_forced_further_pass_gives_the_same_factor(monkeypatch, variables, degre
     assert int(geo["passes"]) == 1 and int(geo3["passes"]) == 2 and bool(geo3["sampled"])
     _check_qr(geo3, a)
     np.testing.assert_allclose(geo3["s"], geo["s"], rtol=1e-13)
+
+
+# the geometry kept on disk (polyjax/_geometry_store.py)
+
+@pytest.fixture
+def kept(monkeypatch, tmp_path):
+    """Streamed fits from 2000 rows on (blocks of 512) with the geometry kept in ``tmp_path``; counts the geometries
+    computed (not loaded)."""
+    import polyjax._fit as fit_mod
+    import polyjax._geometry_store as store
+
+    monkeypatch.setattr(stream_mod, "STREAM_ROWS", 2000)
+    monkeypatch.setattr(stream_mod, "BLOCK", 512)
+    monkeypatch.setattr(store, "store_folder", lambda: tmp_path)
+    computed = []
+    original = fit_mod._geometry_kernel
+
+    def counting(*args, **kwargs):
+        if not any(isinstance(a, jax.core.Tracer) for a in jax.tree.leaves(args)):  # not jax.eval_shape's call
+            computed.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(fit_mod, "_geometry_kernel", counting)
+    for kernel in (fit_mod._fit_kernel, original):
+        kernel.clear_cache()  # BLOCK is read when a kernel is traced
+    fit_mod._GEOMETRY_MEMO.clear()
+    yield computed, tmp_path
+    fit_mod._GEOMETRY_MEMO.clear()
+    for kernel in (fit_mod._fit_kernel, original):
+        kernel.clear_cache()
+
+
+def _fit_fresh(u, v, values, weights, degree=4):
+    """A fit as the first one of a process: the in-process geometry memo forgotten."""
+    import polyjax._fit as fit_mod
+
+    fit_mod._GEOMETRY_MEMO.clear()
+    return pj.fit_polynomial(u, v, values, "lafortune", degree, weights=weights)
+
+
+def _values(u, v, seed=0):
+    h = u + v
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    rng = np.random.default_rng(seed)
+    return np.stack([0.1 + c * h[:, 2] ** (8 * c + 2) + 0.01 * rng.normal(size=len(u)) for c in range(3)])
+
+
+def test_kept_geometry_is_loaded_and_gives_the_same_fit(kept):
+    computed, folder = kept
+    u, v, weights = _problem(4)
+    values = _values(u, v)
+    cold = _fit_fresh(u, v, values, weights)
+    assert len(computed) == 1 and len(list(folder.glob("geometry-*.npz"))) == 1
+    warm = _fit_fresh(u, v, values, weights)
+    assert len(computed) == 1  # loaded, not computed
+    for field in ("l2", "coefficients", "condition", "mean", "rotation", "centre", "halfwidth"):
+        np.testing.assert_allclose(getattr(warm, field), getattr(cold, field), rtol=1e-14, atol=1e-15)
+    dense = jax.jit(lambda y: pj.fit_polynomial(u, v, y, "lafortune", 4, weights=weights))(values)
+    np.testing.assert_allclose(warm.l2, dense.l2, rtol=1e-10)
+
+
+def test_kept_geometry_is_not_used_when_its_inputs_differ(kept):
+    computed, folder = kept
+    u, v, weights = _problem(5)
+    values = _values(u, v)
+    _fit_fresh(u, v, values, weights)
+    other_w = weights.copy()
+    other_w[1234] *= 1.0 + 1e-15  # one weight, in its last bits
+    changed = _fit_fresh(u, v, values, other_w)
+    other_v = v.copy()
+    other_v[[7, 8]] = other_v[[8, 7]]  # two view directions swapped
+    swapped = _fit_fresh(u, other_v, values, weights)
+    _fit_fresh(u, v, values, weights, degree=3)  # other options
+    assert len(computed) == 4 and len(list(folder.glob("geometry-*.npz"))) == 4
+    dense = jax.jit(lambda v, y, w: pj.fit_polynomial(u, v, y, "lafortune", 4, weights=w))
+    np.testing.assert_allclose(changed.l2, dense(v, values, other_w).l2, rtol=1e-10)
+    np.testing.assert_allclose(swapped.l2, dense(other_v, values, weights).l2, rtol=1e-10)
+
+
+def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
+    import polyjax._geometry_store as store
+
+    computed, folder = kept
+    u, v, weights = _problem(6)
+    values = _values(u, v)
+    reference = _fit_fresh(u, v, values, weights)
+    (path,) = folder.glob("geometry-*.npz")
+    key = path.stem.removeprefix("geometry-")
+    path.write_bytes(path.read_bytes()[:-100])  # truncated
+    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
+    assert len(computed) == 2
+    with np.load(path) as f:  # a changed factor under the old checksum
+        arrays = {name: f[name] for name in f.files}
+    arrays["r2"] = arrays["r2"] * 1.01
+    np.savez(path, **arrays)
+    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
+    assert len(computed) == 3
+    # another grid's geometry written under this key, with a valid checksum: its samples and weight do not match
+    import polyjax._fit as fit_mod
+
+    u2, v2, w2 = _problem(7)
+    w2[:100] = 0.0
+    fit_mod._GEOMETRY_MEMO.clear()
+    other = pj.fit_polynomial(u2, v2, _values(u2, v2), "lafortune", 4, weights=w2)
+    assert np.all(np.asarray(other.status) == pj.Result.OK)
+    foreign = fit_mod._GEOMETRY_MEMO["last"]["geo"]
+    store.save(folder, key, foreign)
+    n_computed = len(computed)
+    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
+    assert len(computed) == n_computed + 1

@@ -1,0 +1,119 @@
+"""A streamed fit's geometry kept on disk beside the compilation cache: the first tall fit of a process on a grid
+it has seen before (a MERL material: every ``.binary`` file has the same directions, weights and mask) loads it.
+
+The geometry (:func:`polyjax._stream.stream_geometry`) of a grid is a few ``m x m`` matrices (the PCA and scaling,
+the CholeskyQR2 factors, the SVD of ``R``, ``G``) besides the per-sample rows, which are recomputed from the
+directions in one pass (:func:`polyjax._stream.stream_rows`). It is kept in ``<cache folder>/polyjax-geometry/``,
+the folder of JAX's persistent compilation cache when that is on (:func:`polyjax.enable_compilation_cache`; on by
+default in the command line), and never otherwise; ``POLYJAX_CACHE=off`` or ``POLYJAX_SAVED_GEOMETRY=off`` turns
+it off.
+
+Keyed by a hash of everything the geometry depends on: the CRC-32 of the bytes of the directions, weights and
+mask (which changes with any change of up to 32 adjacent bits, and by chance once in ``2^32`` otherwise; it costs
+about one and a half times the time to copy them), their shapes and dtypes, the fit's options and degrees, the
+versions of JAX and jaxlib and polyjax's source files. A file is used only when it holds that key, a checksum of
+its arrays that matches, the shapes and dtypes the geometry has, finite numbers, and the same samples used and
+total weight as the pass over the rows finds; anything else (a missing, stale, damaged or foreign file) is
+ignored and the geometry is computed and written again. Nothing here is ever an error.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+#: subfolder of the compilation cache folder holding the geometries
+FOLDER = "polyjax-geometry"
+#: environment variable: ``off`` (or ``0``, ``no``, ``false``) keeps no geometry on disk
+ENV = "POLYJAX_SAVED_GEOMETRY"
+#: the geometry's fields kept on disk (the per-sample rows are recomputed)
+FIELDS = ("mean", "rotation", "centre", "halfwidth", "g", "den", "n_used", "scale", "r1inv", "r2", "u", "s", "vt",
+          "ok", "passes", "sampled")
+_OFF = ("off", "0", "no", "false", "none")
+
+
+def store_folder() -> Path | None:
+    """``<compilation cache folder>/polyjax-geometry`` when JAX's persistent compilation cache is on and neither
+    ``POLYJAX_CACHE`` nor ``POLYJAX_SAVED_GEOMETRY`` is off; else None."""
+    import jax
+
+    from ._cache import cache_disabled_by_env
+
+    if os.environ.get(ENV, "").strip().lower() in _OFF or cache_disabled_by_env():
+        return None
+    folder = jax.config.jax_compilation_cache_dir
+    return Path(folder) / FOLDER if folder else None
+
+
+def _fingerprint(arrays) -> int:
+    """CRC-32 of the bytes of every array, in order (the arrays are read where they are, without a copy)."""
+    crc = 0
+    for a in arrays:
+        crc = zlib.crc32(memoryview(np.ascontiguousarray(np.asarray(a))).cast("B"), crc)
+    return crc
+
+
+def geometry_key(inp, degrees, static: dict) -> str:
+    """The hash of everything the geometry of the prepared inputs ``inp`` depends on (module docstring)."""
+    import jax
+    import jaxlib
+
+    from ._aot import _source_stamp
+    from ._stream import BLOCK, PRECONDITION_CONDITION, PRECONDITION_STRIDE
+
+    arrays = (inp.u, inp.v, inp.weights, inp.mask)
+    parts = [jax.__version__, jaxlib.__version__, _source_stamp(), f"{_fingerprint(arrays):08x}",
+             repr(sorted(static.items())), repr([int(d) for d in degrees]),
+             repr((BLOCK, PRECONDITION_STRIDE, PRECONDITION_CONDITION))]
+    parts += [f"{a.shape}:{a.dtype}" for a in arrays]
+    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
+
+
+def _checksum(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for name in FIELDS:
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape};".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def load(folder: Path, key: str, template: dict) -> dict | None:
+    """The kept geometry of ``key`` as numpy arrays, or None unless every check of the module docstring that can be
+    made without the rows passes (``template``: the shapes and dtypes, from :func:`jax.eval_shape`)."""
+    path = folder / f"geometry-{key}.npz"
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            arrays = {name: f[name] for name in FIELDS}
+            stored_key, checksum = str(f["key"]), str(f["checksum"])
+    except Exception:  # noqa: BLE001 - missing, truncated, not a zip, fields missing: not used
+        return None
+    if stored_key != key or checksum != _checksum(arrays):
+        return None
+    for name, a in arrays.items():
+        want = template[name]
+        if a.shape != tuple(want.shape) or a.dtype != want.dtype:
+            return None
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            return None
+    return arrays
+
+
+def save(folder: Path, key: str, geo: dict) -> None:
+    """Write the geometry's small fields for ``key`` (atomically: a whole file or none)."""
+    try:
+        arrays = {name: np.asarray(geo[name]) for name in FIELDS}
+        buf = io.BytesIO()
+        np.savez(buf, key=np.asarray(key), checksum=np.asarray(_checksum(arrays)), **arrays)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"geometry-{key}.npz"
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(buf.getvalue())
+        os.replace(tmp, path)
+    except OSError:  # a read-only or full disk: nothing kept
+        pass
