@@ -10,7 +10,8 @@ it off.
 
 Keyed by a hash of everything the geometry depends on: the CRC-32 of the bytes of the directions, weights and
 mask (which changes with any change of up to 32 adjacent bits, and by chance once in ``2^32`` otherwise; it costs
-about one and a half times the time to copy them), their shapes and dtypes, the fit's options and degrees, the
+about one and a half times the time to copy them; arrays a loader made from its own code, as the MERL grid's
+directions, are named instead, :func:`remember_content`), their shapes and dtypes, the fit's options and degrees, the
 versions of JAX and jaxlib and polyjax's source files. A file is used only when it holds that key, a checksum of
 its arrays that matches, the shapes and dtypes the geometry has, finite numbers, and the same samples used and
 total weight as the pass over the rows finds; anything else (a missing, stale, damaged or foreign file) is
@@ -50,12 +51,33 @@ def store_folder() -> Path | None:
     return Path(folder) / FOLDER if folder else None
 
 
-def _fingerprint(arrays) -> int:
-    """CRC-32 of the bytes of every array, in order (the arrays are read where they are, without a copy)."""
-    crc = 0
-    for a in arrays:
-        crc = zlib.crc32(memoryview(np.ascontiguousarray(np.asarray(a))).cast("B"), crc)
-    return crc
+def _fingerprint(a) -> str:
+    """The name :func:`remember_content` gave ``a``, else the CRC-32 of its bytes (read where they are)."""
+    hit = _CONTENT.get(id(a))
+    if hit is not None and hit[0]() is a:
+        return hit[1]
+    return f"{zlib.crc32(memoryview(np.ascontiguousarray(np.asarray(a))).cast('B')):08x}"
+
+
+_CONTENT: dict = {}
+
+
+def remember_content(a, what: str) -> None:
+    """Record that the device array ``a`` holds what ``what`` names, a deterministic function of polyjax's code (its
+    source files are in every key), e.g. the MERL loader's grid directions ``"merl-grid:(90, 90, 180):float64:u"``:
+    its fingerprint is then that name instead of a CRC of its bytes. Found by identity, forgotten with the array."""
+    import weakref
+
+    key = id(a)
+
+    def forget(ref):
+        if _CONTENT.get(key, (None,))[0] is ref:
+            del _CONTENT[key]
+
+    try:
+        _CONTENT[key] = (weakref.ref(a, forget), what)
+    except TypeError:  # no weak references: fingerprinted by its bytes
+        pass
 
 
 def geometry_key(inp, degrees, static: dict) -> str:
@@ -67,7 +89,7 @@ def geometry_key(inp, degrees, static: dict) -> str:
     from ._stream import BLOCK, PRECONDITION_CONDITION, PRECONDITION_STRIDE
 
     arrays = (inp.u, inp.v, inp.weights, inp.mask)
-    parts = [jax.__version__, jaxlib.__version__, _source_stamp(), f"{_fingerprint(arrays):08x}",
+    parts = [jax.__version__, jaxlib.__version__, _source_stamp(), *(_fingerprint(a) for a in arrays),
              repr(sorted(static.items())), repr([int(d) for d in degrees]),
              repr((BLOCK, PRECONDITION_STRIDE, PRECONDITION_CONDITION))]
     parts += [f"{a.shape}:{a.dtype}" for a in arrays]

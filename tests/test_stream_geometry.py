@@ -196,3 +196,19 @@ def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
     n_computed = len(computed)
     np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
     assert len(computed) == n_computed + 1
+
+
+def test_loader_grid_directions_are_named_not_checksummed():
+    """The MERL loader's grid directions are fingerprinted by name (made by polyjax's code, which is in the key);
+    any other array, a copy of them included, by the CRC-32 of its bytes."""
+    import polyjax._geometry_store as store
+    from polyjax.data import _merl
+
+    u, v, w, _ = _merl._device_grid(pj.data.MERL_RESOLUTION, "float64")
+    assert store._fingerprint(u) == "merl-grid:(90, 90, 180):float64:u"
+    assert store._fingerprint(v) == "merl-grid:(90, 90, 180):float64:v"
+    copy = jnp.array(u)
+    assert store._fingerprint(copy) == store._fingerprint(np.asarray(u)) != store._fingerprint(u)
+    changed = np.asarray(u).copy()
+    changed[12345, 1] = np.nextafter(changed[12345, 1], 2.0)
+    assert store._fingerprint(changed) != store._fingerprint(copy)

@@ -418,6 +418,7 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     again by identity)."""
     import jax
 
+    from .._geometry_store import remember_content
     from .._inputs import remember_unit_directions
 
     u, v, w, _ = merl_grid(resolution)
@@ -432,6 +433,8 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
 
     grid = tuple(jax.device_put(gathered(a)) for a in (u, v, w)) + (jax.device_put(np.ones(idx.size, bool)),)
     remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
+    for a, what in zip(grid[:2], "uv"):  # named for the geometry kept on disk: no checksum of their bytes needed
+        remember_content(a, f"merl-grid:{resolution}:{dtype_name}:{what}")
     return grid
 
 
