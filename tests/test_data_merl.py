@@ -282,3 +282,18 @@ def test_loaded_grid_directions_are_taken_as_unit(tmp_path):
     u, v, ok = _inputs._unit_directions(m.u, m.v)
     assert u is m.u and v is m.v and bool(jnp.all(ok))
     np.testing.assert_allclose(np.asarray(u), np.asarray(safe_normalize(m.u)[0]), rtol=0, atol=1e-15)  # 2 ulp
+
+
+def test_device_grid_is_the_grid_above_the_horizon_bit_for_bit():
+    """The loader's device arrays (built slab by slab, without the full grid) are ``merl_grid``'s arrays at the
+    bins above the horizon, to the last bit, in aligned buffers."""
+    from polyjax.data import _merl
+
+    for cached in (_merl._device_grid, _merl._above_index):
+        cached.cache_clear()
+    du, dv, dw, mask = _merl._device_grid(pj.data.MERL_RESOLUTION, "float64")
+    u, v, w, above = pj.data.merl_grid()
+    assert np.array_equal(_merl._above_index(pj.data.MERL_RESOLUTION), np.flatnonzero(above))
+    for got, want in ((du, u[above]), (dv, v[above]), (dw, w[above])):
+        assert np.array_equal(np.asarray(got), want)
+    assert mask.shape == (int(above.sum()),) and bool(np.all(np.asarray(mask)))
