@@ -248,8 +248,8 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
         A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``sqrt(w cos^2 theta_u)``, ``G``, and
         per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R``, whether
         the Cholesky factors succeeded, the number of passes over the rows (1 to 3) and whether the preconditioner
-        came from the sample of the rows. The same for every
-        material on one grid: :func:`polyjax.fit_polynomial` keeps the last one.
+        came from the sample of the rows. The same for every material on one grid: :func:`polyjax.fit_polynomial`
+        keeps the last one (and :mod:`polyjax._geometry_store` all but the per-sample arrays, on disk).
     """
     block = BLOCK if block is None else int(block)
     stride = PRECONDITION_STRIDE if stride is None else int(stride)
