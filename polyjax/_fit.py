@@ -195,8 +195,9 @@ def _kept_or_new_geometry(inp, degrees, static):
     if folder is None:
         return _geometry_kernel(inp, degrees, **static)
     key = store.geometry_key(inp, degrees, static)
-    template = jax.eval_shape(functools.partial(_geometry_kernel, **static), inp, degrees)
-    kept = store.load(folder, key, template)
+    k = get_variables(static["variables"]).k
+    m = n_terms(k, static["max_degree"], static["interactions"])
+    kept = store.load(folder, key, store.template(k, m, len(degrees), inp.u.dtype))
     if kept is not None:
         rows = _rows_kernel(inp, *(kept[f] for f in ("mean", "rotation", "centre", "halfwidth")),
                             variables=static["variables"], cutoff_deg=static["cutoff_deg"])

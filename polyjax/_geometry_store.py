@@ -96,6 +96,21 @@ def geometry_key(inp, degrees, static: dict) -> str:
     return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 
+def template(k: int, m: int, n_degrees: int, dtype) -> dict:
+    """The shapes and dtypes of the kept fields of a geometry with ``k`` components, ``m`` columns and
+    ``n_degrees`` degrees (those :func:`polyjax._stream.stream_geometry` returns; a test checks them against
+    :func:`jax.eval_shape`), without tracing it."""
+    import jax
+
+    f, i = np.dtype(dtype), np.dtype(jax.dtypes.canonicalize_dtype(np.int64))
+    d, b = n_degrees, np.dtype(bool)
+    shapes = dict(mean=((k,), f), rotation=((k, k), f), centre=((k,), f), halfwidth=((k,), f), g=((m, m), f),
+                  den=((), f), n_used=((), i), scale=((d, m), f), r1inv=((d, m, m), f), r2=((d, m, m), f),
+                  u=((d, m, m), f), s=((d, m), f), vt=((d, m, m), f), ok=((), b), passes=((), np.dtype(np.int32)),
+                  sampled=((), b))
+    return {name: jax.ShapeDtypeStruct(shape, dt) for name, (shape, dt) in shapes.items()}
+
+
 def _checksum(arrays: dict) -> str:
     h = hashlib.sha256()
     for name in FIELDS:
@@ -107,7 +122,7 @@ def _checksum(arrays: dict) -> str:
 
 def load(folder: Path, key: str, template: dict) -> dict | None:
     """The kept geometry of ``key`` as numpy arrays, or None unless every check of the module docstring that can be
-    made without the rows passes (``template``: the shapes and dtypes, from :func:`jax.eval_shape`)."""
+    made without the rows passes (``template``: the shapes and dtypes, :func:`template`)."""
     path = folder / f"geometry-{key}.npz"
     try:
         with np.load(path, allow_pickle=False) as f:

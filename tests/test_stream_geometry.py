@@ -212,3 +212,22 @@ def test_loader_grid_directions_are_named_not_checksummed():
     changed = np.asarray(u).copy()
     changed[12345, 1] = np.nextafter(changed[12345, 1], 2.0)
     assert store._fingerprint(changed) != store._fingerprint(copy)
+
+
+@pytest.mark.parametrize("variables,degrees", [("lafortune", [4]), ("ashikhmin-shirley", [1, 3])])
+def test_kept_fields_template_is_the_geometry_shape(variables, degrees):
+    """The shapes and dtypes a kept geometry is checked against are those the geometry has."""
+    import polyjax._fit as fit_mod
+    import polyjax._geometry_store as store
+    from polyjax._basis import n_terms
+    from polyjax._inputs import prepare_inputs
+
+    u, v, weights = _problem(8)
+    inp, _ = prepare_inputs("fit_polynomial", u, v, _values(u, v), weights, None, cutoff_deg=80.0)
+    static = dict(variables=variables, max_degree=max(degrees), basis="legendre", interactions=False,
+                  cutoff_deg=80.0)
+    shapes = jax.eval_shape(lambda i: fit_mod._geometry_kernel(i, np.asarray(degrees, np.int32), **static), inp)
+    k = pj.get_variables(variables).k
+    want = store.template(k, n_terms(k, max(degrees), False), len(degrees), inp.u.dtype)
+    assert {f: (shapes[f].shape, shapes[f].dtype) for f in store.FIELDS} == {
+        f: (want[f].shape, want[f].dtype) for f in store.FIELDS}
