@@ -1,4 +1,9 @@
-"""Test configuration: float64 once per process, the compilation cache (off unless asked for), and the data root.
+"""Test configuration: float64 once per process, XLA's compile effort, the compilation cache (off unless asked for),
+and the data root.
+
+The tests compile with little optimisation (JAX's ``jax_disable_most_optimizations``, through
+``JAX_DISABLE_MOST_OPTIMIZATIONS=1``, which subprocesses inherit): compiling, not running, is most of the suite's
+time. ``POLYJAX_TEST_XLA_OPT=full`` runs the tests on fully optimised programs, as users get them.
 
 JAX's persistent compilation cache is off in the tests by default: each process compiles its own programs. With it on
 (one folder per run shared by the pytest-xdist workers and their subprocesses) a CI run crashed in JAX's cache write
@@ -16,9 +21,20 @@ import os
 import sys
 from pathlib import Path
 
-import jax
+#: "full" compiles the tests' programs with XLA's full optimisation, as users get them
+_OPT_ENV = "POLYJAX_TEST_XLA_OPT"
+_FAST_COMPILE = os.environ.get(_OPT_ENV, "").strip().lower() != "full"
+if _FAST_COMPILE:
+    # compilation dominates the suite's time and the tests' programs run for milliseconds: JAX's
+    # ``jax_disable_most_optimizations`` (LLVM optimisation level 0, no expensive LLVM passes; the same HLO and the same
+    # IEEE arithmetic, no fast-math) roughly halves XLA's CPU compile time; inherited by subprocesses
+    os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = "1"
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+if _FAST_COMPILE:  # in case a plugin imported JAX before this file (the variable is read when JAX is imported)
+    jax.config.update("jax_disable_most_optimizations", True)
 #: the variable naming this run's cache folder, set by the controlling process and inherited by xdist workers
 _RUN_CACHE_ENV = "POLYJAX_TEST_RUN_CACHE"
 #: "run" (one folder per test run) or a folder a developer names to keep compiled programs between runs (README)
