@@ -100,14 +100,25 @@ def _run_compilation_cache():
         enable_compilation_cache(folder)
 
 
+#: the longest files (CPU time of each in one process, longest first): they start first
+LONG_FILES = ("test_baselines.py", "test_export.py", "test_grad_baselines.py", "test_scale.py", "test_reproduce.py",
+              "test_latency.py", "test_robust_optimizer.py", "test_published.py", "test_cli_usability.py")
+
+
+def _file_rank(its) -> tuple:
+    name = its[0].nodeid.split("::")[0].rsplit("/", 1)[-1]
+    return (not any("slow" in it.keywords for it in its),
+            LONG_FILES.index(name) if name in LONG_FILES else len(LONG_FILES), -len(its))
+
+
 def pytest_collection_modifyitems(config, items):
-    """Files with a long test first, then the files with more tests (xdist hands whole files to its workers in this
-    order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests
-    (a failure in CI)."""
+    """Files with a long test first, then the longest files, then the files with more tests (xdist hands whole files
+    to its workers in this order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root,
+    skip the data tests (a failure in CI)."""
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
-    order = sorted(files.values(), key=lambda its: (not any("slow" in it.keywords for it in its), -len(its)))
+    order = sorted(files.values(), key=_file_rank)
     items[:] = [it for its in order for it in its]  # sorted() is stable: the order within a file is kept
     if has_data_root():
         return
