@@ -100,9 +100,9 @@ def _run_compilation_cache():
         enable_compilation_cache(folder)
 
 
-#: the longest files (CPU time of each in one process, longest first): they start first
-LONG_FILES = ("test_baselines.py", "test_export.py", "test_grad_baselines.py", "test_scale.py", "test_reproduce.py",
-              "test_latency.py", "test_robust_optimizer.py", "test_published.py", "test_cli_usability.py")
+#: the longest files without a slow test (each alone in one process, longest first): they start next
+LONG_FILES = ("test_baselines.py", "test_robust_optimizer.py", "test_export.py", "test_latency.py", "test_scale.py",
+              "test_published.py")
 
 
 def _file_rank(its) -> tuple:
