@@ -1,4 +1,10 @@
-"""Test configuration: float64 once per process, the compilation cache (off unless asked for), and the data root.
+"""Test configuration: float64 once per process, XLA's compile effort, the compilation cache (off unless asked for),
+and the data root.
+
+The tests compile with little optimisation (JAX's ``jax_disable_most_optimizations``, through
+``JAX_DISABLE_MOST_OPTIMIZATIONS=1``, and XLA's ``--xla_cpu_use_fusion_emitters=false`` in ``XLA_FLAGS``, when the
+installed XLA knows it; subprocesses inherit both): compiling, not running, is most of the suite's time.
+``POLYJAX_TEST_XLA_OPT=full`` runs the tests on fully optimised programs, as users get them.
 
 JAX's persistent compilation cache is off in the tests by default: each process compiles its own programs. With it on
 (one folder per run shared by the pytest-xdist workers and their subprocesses) a CI run crashed in JAX's cache write
@@ -16,9 +22,33 @@ import os
 import sys
 from pathlib import Path
 
-import jax
+#: "full" compiles the tests' programs with XLA's full optimisation, as users get them
+_OPT_ENV = "POLYJAX_TEST_XLA_OPT"
+#: XLA's CPU code generation by its elemental emitters instead of its fusion emitters: a third of the compile time
+_FAST_XLA_FLAG = "--xla_cpu_use_fusion_emitters=false"
+_FAST_COMPILE = os.environ.get(_OPT_ENV, "").strip().lower() != "full"
+if _FAST_COMPILE:
+    # compilation dominates the suite's time and the tests' programs run for milliseconds: JAX's
+    # ``jax_disable_most_optimizations`` (LLVM optimisation level 0, no expensive LLVM passes) and XLA's older
+    # elemental code generation together cut the CPU time of compiling a nonlinear fit from about 7 s to 2.5 s; the
+    # same HLO and the same IEEE arithmetic (no fast-math), so the same numbers to rounding. Set before JAX starts
+    # its CPU backend, and inherited by xdist workers and subprocesses.
+    os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"] = "1"
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "PYTEST_XDIST_WORKER" not in os.environ and "xla_cpu_use_fusion_emitters" not in flags:
+        # an XLA that no longer knows the flag aborts at start: try it in a fresh process first (about a second)
+        import subprocess
+
+        trial = subprocess.run([sys.executable, "-c", "import jax; jax.devices()"], capture_output=True, timeout=300,
+                               env=dict(os.environ, XLA_FLAGS=f"{flags} {_FAST_XLA_FLAG}".strip()))
+        if trial.returncode == 0:
+            os.environ["XLA_FLAGS"] = f"{flags} {_FAST_XLA_FLAG}".strip()
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+if _FAST_COMPILE:  # in case a plugin imported JAX before this file (the variable is read when JAX is imported)
+    jax.config.update("jax_disable_most_optimizations", True)
 #: the variable naming this run's cache folder, set by the controlling process and inherited by xdist workers
 _RUN_CACHE_ENV = "POLYJAX_TEST_RUN_CACHE"
 #: "run" (one folder per test run) or a folder a developer names to keep compiled programs between runs (README)
@@ -70,14 +100,25 @@ def _run_compilation_cache():
         enable_compilation_cache(folder)
 
 
+#: the longest files without a slow test (each alone in one process, longest first): they start next
+LONG_FILES = ("test_baselines.py", "test_robust_optimizer.py", "test_export.py", "test_latency.py", "test_scale.py",
+              "test_published.py")
+
+
+def _file_rank(its) -> tuple:
+    name = its[0].nodeid.split("::")[0].rsplit("/", 1)[-1]
+    return (not any("slow" in it.keywords for it in its),
+            LONG_FILES.index(name) if name in LONG_FILES else len(LONG_FILES), -len(its))
+
+
 def pytest_collection_modifyitems(config, items):
-    """Files with a long test first, then the files with more tests (xdist hands whole files to its workers in this
-    order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests
-    (a failure in CI)."""
+    """Files with a long test first, then the longest files, then the files with more tests (xdist hands whole files
+    to its workers in this order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root,
+    skip the data tests (a failure in CI)."""
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
-    order = sorted(files.values(), key=lambda its: (not any("slow" in it.keywords for it in its), -len(its)))
+    order = sorted(files.values(), key=_file_rank)
     items[:] = [it for its in order for it in its]  # sorted() is stable: the order within a file is kept
     if has_data_root():
         return

@@ -48,35 +48,46 @@ def _normalised(args, i):
 
 
 @pytest.mark.data
-@pytest.mark.slow  # a forward and a reverse derivative compiled per argument: 1-2 minutes on 2 loaded cores
+@pytest.mark.slow  # a forward and a reverse derivative of the fit compiled per model: about a minute on 2 cores
 @pytest.mark.parametrize("name, which", [("ward", (0, 1, 2, 3)), ("cook-torrance", (0, 1))])
 def test_jvp_and_grad_match_finite_differences(curet, name, which):
     # Cook-Torrance's shadowing term min(1, 2 (n.h)(n.u) / (v.h)) has a kink within 4e-7 of two CUReT samples
     # (153 and 190), so its derivative w.r.t. the directions is tested on Ward only
     rng = np.random.default_rng(0)
 
-    def fitted(*args):
-        y, w, u, v = args
+    def point(xs):
+        """The fit's arguments with those in ``which`` replaced by ``xs`` (directions among them renormalised)."""
+        args = list(curet)
+        for i, x in zip(which, xs):
+            args = _normalised(args[:i] + [x] + args[i + 1:], i)
+        return args
+
+    def fitted(xs):
+        y, w, u, v = point(xs)
         f = bl.fit(name, u, v, y, weights=w, **KW)
         return f.params[0], f.l2[0]
 
+    # one compiled forward derivative and one reverse gradient w.r.t. every argument in ``which`` (rather than a
+    # program per argument): the derivative along argument i is the forward derivative along a tangent that is
+    # zero in every other argument, and its reverse counterpart is the gradient's block i, so each argument's
+    # derivative is checked on its own, as before, against its own finite difference
+    xs = tuple(curet[i] for i in which)
+    jvp = jax.jit(lambda xs_, ts_: jax.jvp(fitted, (xs_,), (ts_,)))
+    g_all = jax.jit(jax.grad(lambda xs_: fitted(xs_)[1]))(xs)
     exact = jax.jit(lambda *a: _exact_fit(name, *a))
-    for i in which:
+    for k, i in enumerate(which):
         x = curet[i]
         t = jnp.asarray(rng.normal(size=x.shape)) * (jnp.abs(x) if i < 2 else 0.1)
-
-        def along(x_, i=i):
-            return _normalised(curet[:i] + (x_,) + curet[i + 1:], i)
-
-        (p0, l0), (dp, dl) = jax.jit(lambda x_, t_: jax.jvp(lambda z: fitted(*along(z)), (x_,), (t_,)))(x, t)
+        ts = tuple(t if j == k else jnp.zeros_like(a) for j, a in enumerate(xs))
+        (p0, l0), (dp, dl) = jvp(xs, ts)
         eps = 1e-5
-        pp, lp = exact(*along(x + eps * t))
-        pm, lm = exact(*along(x - eps * t))
+        pp, lp = exact(*point(xs[:k] + (x + eps * t,) + xs[k + 1:]))
+        pm, lm = exact(*point(xs[:k] + (x - eps * t,) + xs[k + 1:]))
         fd_p, fd_l = (pp - pm) / (2 * eps), (lp - lm) / (2 * eps)
         assert np.max(np.abs(dp - fd_p)) <= 1e-4 * np.max(np.abs(fd_p)), (name, i, dp, fd_p)
         assert abs(dl - fd_l) <= 1e-4 * abs(fd_l), (name, i, dl, fd_l)
         # reverse mode agrees with forward mode, and is finite although samples are cut
-        g = jax.jit(jax.grad(lambda z: fitted(*along(z))[1]))(x)
+        g = g_all[k]
         assert bool(jnp.all(jnp.isfinite(g)))
         np.testing.assert_allclose(jnp.sum(g * t), dl, rtol=1e-9)
 

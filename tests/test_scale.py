@@ -1,6 +1,8 @@
 """Per-lane directions (each texel its own directions and PCA), streamed in blocks of lanes; sharded fits on 8
 simulated devices; a 2-process ``jax.distributed`` fit written shard by shard."""
 
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -66,6 +68,9 @@ def test_per_lane_directions_differentiate():
     u, v, vals = _texels(2, 2, 2, 25)
     w = np.random.default_rng(3).uniform(0.5, 2.0, size=(2, 2, 25))
 
+    # compiled: under check_grads' tracers the fit takes the same (traced-input) path as under jit, and one compiled
+    # program per derivative replaces a dispatch per operation
+    @jax.jit
     def f(vals, w, u):
         m = pj.fit_polynomial(u, v, vals, "lafortune", degree=2, weights=w, lane_block=2)
         return m.l2 + jnp.sum(m.coefficients[..., :3], axis=-1)
@@ -119,7 +124,6 @@ print("RESULT " + json.dumps(out))
 
 def _run(code, env_extra, timeout=600):
     import json
-    import os
     import subprocess
     import sys
     from pathlib import Path
@@ -134,7 +138,8 @@ def _run(code, env_extra, timeout=600):
 
 
 def test_sharded_fit_on_8_devices():
-    out = _run(_SHARDED, {"XLA_FLAGS": "--xla_force_host_platform_device_count=8"})
+    flags = os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=8"  # the tests' own kept
+    out = _run(_SHARDED, {"XLA_FLAGS": flags.strip()})
     assert "Explicit" in out["axis_types"]
     for name in ("per_lane_directions", "shared_directions", "per_lane_weights"):
         r = out[name]
@@ -181,7 +186,6 @@ print("RESULT " + __import__("json").dumps(dict(
 
 def test_two_process_distributed_fit_writes_its_shards(tmp_path):
     import json
-    import os
     import subprocess
     import sys
     from pathlib import Path
@@ -191,7 +195,8 @@ def test_two_process_distributed_fit_writes_its_shards(tmp_path):
     root = Path(__file__).resolve().parents[1]
     port = svbrdf.free_port()
     env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    env.pop("XLA_FLAGS", None)
+    # one device per process (no simulated devices); the tests' other XLA flags kept
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split() if "device_count" not in f)
     procs = [subprocess.Popen([sys.executable, "-c", _PROCESS, str(i), str(port), str(tmp_path / "tex")],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=root)
              for i in range(2)]
