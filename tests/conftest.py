@@ -100,21 +100,34 @@ def _run_compilation_cache():
         enable_compilation_cache(folder)
 
 
-#: the longest files without a slow test (each alone in one process, longest first): they start next
-LONG_FILES = ("test_baselines.py", "test_robust_optimizer.py", "test_export.py", "test_latency.py", "test_scale.py",
-              "test_published.py")
+#: CPU seconds (user + system, subprocesses included) of each test file alone in one process on 2 cores, measured in
+#: one sequence on a shared machine (load average 3-6): xdist hands whole files to its workers in this order, longest
+#: first (``--no-loadscope-reorder``), so that no long file starts near the end while the other worker runs out of
+#: files. A worker shares compiled programs between its files, so a run needs less than the sum.
+FILE_SECONDS = {"test_sampling.py": 64, "test_grad_fit.py": 60, "test_export.py": 53, "test_baselines.py": 48,
+    "test_fit_images_baselines.py": 46, "test_svbrdf.py": 42, "test_render_mis.py": 39, "test_fit_images.py": 38,
+    "test_reproduce.py": 37, "test_grad_baselines.py": 33, "test_robust_optimizer.py": 32, "test_scale.py": 31,
+    "test_latency.py": 29, "test_fit.py": 29, "test_grad_render.py": 28, "test_published.py": 24, "test_logfit.py": 22,
+    "test_user_defects.py": 22, "test_render.py": 21, "test_stream_geometry.py": 21, "test_tabulate.py": 19,
+    "test_robust_data.py": 18, "test_robust_geometry.py": 18, "test_lstsq.py": 18, "test_robust_degree.py": 16,
+    "test_saved_models.py": 16, "test_robust_edge_inputs.py": 15, "test_data_nbrdf.py": 13, "test_nbrdf_sets.py": 11,
+    "test_robust_properties.py": 11, "test_mitsuba.py": 10, "test_robust_rank.py": 9, "test_render_cli.py": 9,
+    "test_cli_usability.py": 9, "test_data_merl.py": 8, "test_robust_symmetry.py": 7, "test_cli.py": 7,
+    "test_fit_images_cli.py": 6, "test_inputs.py": 6, "test_render_image.py": 6, "test_data_cornell.py": 5,
+    "test_architecture.py": 3}
+#: where a file not in the table (not measured yet) starts: as a file of this many seconds
+UNMEASURED_SECONDS = 20
 
 
 def _file_rank(its) -> tuple:
     name = its[0].nodeid.split("::")[0].rsplit("/", 1)[-1]
-    return (not any("slow" in it.keywords for it in its),
-            LONG_FILES.index(name) if name in LONG_FILES else len(LONG_FILES), -len(its))
+    return -FILE_SECONDS.get(name, UNMEASURED_SECONDS), -len(its)
 
 
 def pytest_collection_modifyitems(config, items):
-    """Files with a long test first, then the longest files, then the files with more tests (xdist hands whole files
-    to its workers in this order, ``--no-loadscope-reorder``, so the longest do not start last); without a data root,
-    skip the data tests (a failure in CI)."""
+    """The longest files first (:data:`FILE_SECONDS`; xdist hands whole files to its workers in this order,
+    ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests (a
+    failure in CI)."""
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
