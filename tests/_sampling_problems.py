@@ -5,7 +5,6 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import stats
 
 import polyjax as pj
 
@@ -93,6 +92,8 @@ def chi2_pvalue(u, pdf, min_expected=5.0):
     assert np.all(o[~keep] == 0), "samples where the density is 0"
     e, o = e[keep], o[keep]
     chi2 = float(np.sum((o - e) ** 2 / e))
+    from scipy import stats  # here, not at the top: every xdist worker imports this file to collect (1.9 s)
+
     return float(stats.chi2.sf(chi2, len(e) - 1))
 
 

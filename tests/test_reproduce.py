@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from benchmarks.paper.constants import PAPER_TABLE2, PAPER_TABLE3, PAPER_TABLE4
-from benchmarks.paper.figures import pareto_front
-from benchmarks.paper.run import main
 
 
 def test_pareto_front():
+    # the reproduction's modules imported in the tests, not at the top: every xdist worker imports this file to
+    # collect, and its figures import matplotlib.pyplot (about 1.9 s of a worker's start)
+    from benchmarks.paper.figures import pareto_front
+
     pts = [(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (0.5, 6.0), (4.0, 1.0), (2.0, 2.5)]
     assert sorted(pareto_front(pts)) == [0, 3, 4, 5]
 
@@ -37,6 +39,8 @@ def _numbers(obj):
 @pytest.mark.data
 @pytest.mark.slow
 def test_reproduce_quick(tmp_path, data_root):
+    from benchmarks.paper.run import main
+
     out = tmp_path / "res"
     assert main(["--quick", "--out", str(out), "--data-root", str(data_root)]) == 0
     for name in ("table1.md", "table2.md", "table3.md", "table4.md", "lowest_counts.md", "references.md", "report.md",
