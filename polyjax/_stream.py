@@ -261,7 +261,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     rows = lambda t_b, sw_b: _rows(t_b, sw_b, max_degree, basis, interactions)  # noqa: E731
     scale1, r1, ok1, read_all = _preconditioner(t, sw, active, rows, block, max(1, min(stride, t.shape[1] // 1024)))
     eye = jnp.eye(r1.shape[-1], dtype=dtype)
-    r1inv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r1, active)
+    r1inv = _active_inverse(r1, active)
     c, colsq = _orthogonal_pass(t, sw, scale1, r1inv, rows, block)
 
     def second(act, c):
@@ -275,7 +275,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
 
     def refine():
         r = jnp.einsum("dij,djk->dik", r2, r1, precision=_HI)
-        rinv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r, active)
+        rinv = _active_inverse(r, active)
         c3, _ = _orthogonal_pass(t, sw, scale1, rinv, rows, block)
         r3, ok3 = jax.vmap(second)(active, c3)
         return r, r3, ok3
@@ -286,7 +286,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     # the same factor in the exact column norms E of A (those of the dense fit): A E^{-1} = Q R_2 R_1 E_1 E^{-1}
     scale = jax.vmap(lambda act: jnp.where(act & (colsq > 0), jnp.sqrt(jnp.where(act, colsq, 1.0)), 1.0))(active)
     r1 = r1 * (scale1 / scale)[:, None, :]
-    r1inv = jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r1, active)
+    r1inv = _active_inverse(r1, active)
 
     def finish(act, r1, r2, e):
         r = jnp.where(act[:, None] & act[None, :], r2 @ r1, 0.0)
@@ -298,6 +298,13 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw,
                 g=g, den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
                 ok=jnp.all(ok1) & jnp.all(ok2), passes=passes, sampled=~read_all)
+
+
+def _active_inverse(r, active):
+    """``R^{-1}`` of the upper triangular factors ``r (D, m, m)``, rows of inactive columns (``active (D, m)``)
+    zeroed."""
+    eye = jnp.eye(r.shape[-1], dtype=r.dtype)
+    return jax.vmap(lambda r, a: jax.scipy.linalg.solve_triangular(r, eye, lower=False) * a[:, None])(r, active)
 
 
 def _condition_upper(r):

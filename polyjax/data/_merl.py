@@ -220,13 +220,20 @@ def _grid_directions(resolution: tuple[int, int, int]) -> tuple[np.ndarray, np.n
     c, s, dx, dy, dz = c[:, None, None], s[:, None, None], dx[None], dy[None], dz[None]
     u = np.empty((nh, nd, npd, 3))
     v = np.empty((nh, nd, npd, 3))
-    np.add(dx * c, dz * s, out=u[..., 0])
-    np.copyto(u[..., 1], np.broadcast_to(dy, u.shape[:3]))
-    np.subtract(dz * c, dx * s, out=u[..., 2])
-    np.add(-dx * c, dz * s, out=v[..., 0])
-    np.copyto(v[..., 1], np.broadcast_to(-dy, v.shape[:3]))
-    np.add(dz * c, dx * s, out=v[..., 2])
+    _fill_directions(u, v, c, s, dx, dy, dz)
     return u.reshape(-1, 3), v.reshape(-1, 3)
+
+
+def _fill_directions(u, v, c, s, x, y, z) -> None:
+    """Write into ``u``, ``v`` (``(..., 3)``) the light and view directions of the half-vector elevation with cosine
+    ``c`` and sine ``s`` and the difference vector ``(x, y, z)`` (broadcast against ``u[..., 0]``): the rotation of
+    :func:`rusinkiewicz_to_directions` (the same operations on the same numbers, so the same bits)."""
+    u[..., 0] = x * c + z * s
+    u[..., 1] = y
+    u[..., 2] = z * c - x * s
+    v[..., 0] = -x * c + z * s
+    v[..., 1] = -y
+    v[..., 2] = z * c + x * s
 
 
 @functools.lru_cache(maxsize=4)
@@ -451,13 +458,7 @@ def _above_directions(resolution, idx, dtype_name):
     for i in range(nh):
         a, b = bounds[i], bounds[i + 1]
         sel = idx[a:b] - i * (nd * npd)
-        x, y, z = dx[sel], dy[sel], dz[sel]
-        u[a:b, 0] = x * c[i] + z * s[i]
-        u[a:b, 1] = y
-        u[a:b, 2] = z * c[i] - x * s[i]
-        v[a:b, 0] = -x * c[i] + z * s[i]
-        v[a:b, 1] = -y
-        v[a:b, 2] = z * c[i] + x * s[i]
+        _fill_directions(u[a:b], v[a:b], c[i], s[i], dx[sel], dy[sel], dz[sel])
     return u, v
 
 
