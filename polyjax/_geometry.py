@@ -86,6 +86,12 @@ def cutoff_mask(u: ArrayLike, v: ArrayLike, cutoff_deg: float | None = 80.0) -> 
     ``cos theta >= cos(cutoff) - tol`` uses ``tol = max(1e-9, 4 eps)`` of the directions' dtype, so
     float32 and float64 keep the same samples (MERL's grid has bins at exactly 80 degrees).
     """
+    return _cutoff_mask(jnp.asarray(u), jnp.asarray(v), cutoff_deg)
+
+
+@jax.jit
+def _cutoff_mask(u, v, cutoff_deg):
+    """:func:`cutoff_mask` in one compiled program (``cutoff_deg`` None is part of its structure)."""
     cu = cos_theta(u)
     cv = cos_theta(v)
     keep = (cu > 0) & (cv > 0)

@@ -17,6 +17,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -140,8 +141,10 @@ def _checked_lists(scenes, images, pixel_weights):
     return scenes, images, list(pixel_weights)
 
 
+@eqx.filter_jit
 def _kept(ls, img, pw, saturation, cutoff_deg):
-    """``(N,)`` the pixels of one image that enter the fit (the rules of :func:`image_rows`)."""
+    """``(N,)`` the pixels of one image that enter the fit (the rules of :func:`image_rows`); one compiled program
+    (the options are static)."""
     ok = ls.on_target & ~ls.shadowed & jnp.all(jnp.isfinite(img), axis=-1) & (pw > 0)
     if saturation is not None:
         ok = ok & jnp.all(img < saturation, axis=-1)
@@ -158,6 +161,17 @@ def _gather(rows, compact):
     """One :class:`ImageRows` of every image's ``(light samples, image, pixel weights, kept)``: light samples
     padded to the largest ``J`` (zero weight), rows not kept zeroed, and with ``compact`` and concrete inputs only
     the kept rows."""
+    u, v, c, y, wpx, keep = _stacked(rows)
+    if compact and is_concrete(keep):
+        idx = np.flatnonzero(np.asarray(keep))
+        if idx.size:
+            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
+    return ImageRows(u=u, v=v, weight=c, values=y, pixel_weights=wpx, keep=keep)
+
+
+@jax.jit
+def _stacked(rows):
+    """Every image's rows stacked (:func:`_gather` before its compaction) in one compiled program."""
     n_j = max(ls.u.shape[1] for ls, _, _, _ in rows)
 
     def pad(a):  # (N, J, 3) -> (N, n_j, 3): zero weight, no light
@@ -169,11 +183,7 @@ def _gather(rows, compact):
     c = jnp.where(keep[:, None, None], jnp.concatenate([pad(ls.weight) for ls, _, _, _ in rows]), 0.0)
     y = jnp.where(keep[:, None], jnp.concatenate([img for _, img, _, _ in rows]), 0.0)
     wpx = jnp.where(keep, jnp.concatenate([pw for _, _, pw, _ in rows]), 0.0)
-    if compact and is_concrete(keep):
-        idx = np.flatnonzero(np.asarray(keep))
-        if idx.size:
-            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
-    return ImageRows(u=u, v=v, weight=c, values=y, pixel_weights=wpx, keep=keep)
+    return u, v, c, y, wpx, keep
 
 
 __all__ = ["ImageRows", "image_rows"]

@@ -157,13 +157,18 @@ def _check_directions(u, v, concrete: bool, lane_directions: bool = False) -> in
         # a reduction on the device(s): a sharded input is never gathered to the host
         # (inside a trace, where the reduction of a closed-over concrete array is traced: on the host)
         if concrete:
-            finite = jnp.all(jnp.isfinite(w))
+            finite = _all_finite(w)
             finite = bool(finite) if is_concrete(finite) else bool(np.all(np.isfinite(np.asarray(w))))
         if concrete and not finite:
             raise InputError(f"{name}: expected finite direction vectors, found NaN or inf")
     if u.shape != v.shape:
         raise InputError(f"u and v: expected the same shape, found {u.shape} and {v.shape}")
     return u.shape[-2]
+
+
+@jax.jit
+def _all_finite(w):
+    return jnp.all(jnp.isfinite(w))
 
 
 def _lane_array(name, a, n, batch, dtype, dbatch=None):

@@ -116,7 +116,7 @@ def weighted_lstsq(
     m = design.shape[1]
     dtype = jnp.result_type(design, y2)
     act = jnp.ones((m,), bool) if active is None else jnp.asarray(active, bool)
-    coef, rank, condition, s, n_active = _solve(
+    coef, rank, condition, s, n_active = _solve_compiled(
         jnp.asarray(design, dtype), jnp.asarray(y2, dtype), jnp.asarray(weights, dtype), act, method, rcond
     )
     return LstsqSolution(
@@ -191,6 +191,13 @@ def _solve_svd(uu, s, vt, utb, scale, act, n, rcond):
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5))
 def _solve(design, y2, weights, act, method, rcond):
     return _factor(design, y2, weights, act, method, rcond)[0]
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5))
+def _solve_compiled(design, y2, weights, act, method, rcond):
+    """:func:`_solve` as one compiled program (and so its derivatives, under ``grad`` or ``jvp`` outside ``jit``:
+    op by op, each of their operations would be compiled on its own)."""
+    return _solve(design, y2, weights, act, method, rcond)
 
 
 def _solve_jvp(method, rcond, primals, tangents):

@@ -27,8 +27,13 @@ def fit_weights(
         ``w_i cos^2(theta_u,i)``, the weight on the squared residual. Samples with
         ``theta_u`` or ``theta_v`` above ``cutoff_deg``, below the horizon or masked out get 0.
     """
-    u = jnp.asarray(u)
-    v = jnp.asarray(v)
+    as_array = (lambda a: a if a is None else jnp.asarray(a))  # noqa: E731
+    return _fit_weights(jnp.asarray(u), jnp.asarray(v), as_array(weights), as_array(mask), cutoff_deg)
+
+
+@jax.jit
+def _fit_weights(u, v, weights, mask, cutoff_deg):
+    """:func:`fit_weights` in one compiled program (``None`` arguments are part of its structure)."""
     keep = cutoff_mask(u, v, cutoff_deg)
     w = jnp.ones(keep.shape, dtype=u.dtype) if weights is None else jnp.asarray(weights, dtype=u.dtype)
     w = jnp.where(keep, w, 0.0)
@@ -119,8 +124,12 @@ def psnr(
     Returns:
         PSNR in dB; ``inf`` for identical images.
     """
-    a = jnp.asarray(image)
-    b = jnp.asarray(reference)
+    return _psnr(jnp.asarray(image), jnp.asarray(reference), peak, None if mask is None else jnp.asarray(mask))
+
+
+@jax.jit
+def _psnr(a, b, peak, mask):
+    """:func:`psnr` in one compiled program."""
     shape = jnp.broadcast_shapes(a.shape, b.shape)
     m = jnp.ones(shape, bool) if mask is None else jnp.broadcast_to(jnp.asarray(mask), shape)
     d = jnp.where(m, a - b, 0.0)

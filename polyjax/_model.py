@@ -103,7 +103,7 @@ class PolynomialBRDF(eqx.Module):
             direction. The polynomial itself is not clamped and can be negative.
         """
         dtype = self.coefficients.dtype
-        u, v = jnp.asarray(u, dtype), jnp.asarray(v, dtype)
+        u, v = (a if isinstance(a, jax.Array) else np.asarray(a, dtype) for a in (u, v))
         if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
             raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
         try:
@@ -111,22 +111,7 @@ class PolynomialBRDF(eqx.Module):
         except ValueError:
             raise InputError(
                 f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
-        u, ok_u = safe_normalize(u)
-        v, ok_v = safe_normalize(v)
-        u, v = jnp.broadcast_arrays(u, v)
-        above = ok_u & ok_v & (u[..., 2] > 0) & (v[..., 2] > 0)
-        x = get_variables(self.variables).fn(u, v)
-        nb = len(self.batch_shape)
-        params = (self.coefficients, self.mean, self.rotation, self.centre, self.halfwidth)
-        if nb == 0:
-            out = self._lane(params, x)
-        else:
-            flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
-            out = jax.vmap(lambda p: self._lane(p, x))(flat)
-            out = out.reshape(self.batch_shape + out.shape[1:])
-        if self.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
-            out = jnp.exp(out) - self.eps
-        return jnp.where(above, out, 0.0)
+        return _evaluate(self, u, v)
 
     def paper_coefficients(self) -> np.ndarray:
         r"""The coefficients ``beta`` of equation (3) in the paper's monomials of the raw components.
@@ -173,3 +158,26 @@ def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:
 
 
 __all__ = ["FitStatus", "PolynomialBRDF", "evaluate_paper_form", "exponents"]
+
+
+@jax.jit
+def _evaluate(model: PolynomialBRDF, u, v):
+    """:meth:`PolynomialBRDF.__call__` after its checks: one compiled program per model family and shapes (op by
+    op, each of its few dozen operations would be compiled on its own for every new shape)."""
+    dtype = model.coefficients.dtype
+    u, ok_u = safe_normalize(jnp.asarray(u, dtype))
+    v, ok_v = safe_normalize(jnp.asarray(v, dtype))
+    u, v = jnp.broadcast_arrays(u, v)
+    above = ok_u & ok_v & (u[..., 2] > 0) & (v[..., 2] > 0)
+    x = get_variables(model.variables).fn(u, v)
+    nb = len(model.batch_shape)
+    params = (model.coefficients, model.mean, model.rotation, model.centre, model.halfwidth)
+    if nb == 0:
+        out = model._lane(params, x)
+    else:
+        flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
+        out = jax.vmap(lambda p: model._lane(p, x))(flat)
+        out = out.reshape(model.batch_shape + out.shape[1:])
+    if model.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
+        out = jnp.exp(out) - model.eps
+    return jnp.where(above, out, 0.0)

@@ -12,6 +12,7 @@ rounding, and a plain ``argmax`` then flipped the sign with the order of the sam
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -36,6 +37,7 @@ class PCA(eqx.Module):
         return (x - self.mean) @ self.rotation
 
 
+@jax.jit
 def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> PCA:
     """Fit the PCA of the rows of ``x`` where ``keep > 0``.
 
@@ -67,6 +69,7 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
     return pca_from_covariance(mean, cov)
 
 
+@jax.jit
 def pca_from_covariance(mean: Float[Array, " k"], cov: Float[Array, "k k"]) -> PCA:
     """The :class:`PCA` of samples with this mean and covariance (the eigen-decomposition and sign rule of
     :func:`fit_pca`, which calls it; the streamed fit gives it moments accumulated over the samples' ``(k, n)``

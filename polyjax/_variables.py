@@ -32,13 +32,18 @@ in ``u`` and ``v`` and the fitted model is reciprocal. Users can add their own s
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Callable
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._errors import InputError, UnknownNameError
 from ._geometry import half_vector
+
+#: ``jax.jit`` of each variable function, made once: a set evaluated outside a trace runs as one compiled program
+_compiled = functools.lru_cache(maxsize=None)(jax.jit)
 
 VariableFn = Callable[[Float[Array, "... 3"], Float[Array, "... 3"]], Float[Array, "... k"]]
 
@@ -62,7 +67,7 @@ class VariableSet:
     description: str = ""
 
     def __call__(self, u, v):
-        return self.fn(u, v)
+        return _compiled(self.fn)(u, v)
 
 
 def _ward(u, v):

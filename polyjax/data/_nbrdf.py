@@ -46,6 +46,7 @@ NBRDF_ZIP = "nbrdf_sztrajman2021/merl_nbrdf.zip"
 _LAYERS = (("dense_1", (6, 21)), ("dense_2", (21, 21)), ("dense_3", (21, 3)))
 
 
+@jax.jit
 def _mlp(params, x):
     """The network on inputs ``x (..., 6)``: raw RGB ``(..., 3)`` (may be negative)."""
     w1, b1, w2, b2, w3, b3 = (p.astype(x.dtype) for p in params)
@@ -54,6 +55,7 @@ def _mlp(params, x):
     return jnp.expm1(a @ w3 + b3)
 
 
+@jax.jit
 def _half_diff_inputs(u, v):
     """Network inputs ``(h, d)`` (..., 6) from light/view directions (gradient-safe at the pole)."""
     s = u + v
@@ -119,9 +121,15 @@ class NeuralBRDF(eqx.Module):
         u, v = jnp.broadcast_arrays(jnp.asarray(u), jnp.asarray(v))
         if not jnp.issubdtype(u.dtype, jnp.floating):
             u, v = u.astype(jnp.result_type(float)), v.astype(jnp.result_type(float))
-        valid = (u[..., 2] > 0) & (v[..., 2] > 0)
-        y = _mlp(self.params, _half_diff_inputs(u, v))
-        return jnp.where(valid[..., None], jnp.maximum(y, 0.0), 0.0)
+        return _clamped(self.params, u, v)
+
+
+@jax.jit
+def _clamped(params, u, v):
+    """:meth:`NeuralBRDF.__call__` in one compiled program (op by op, every operation compiles on its own)."""
+    valid = (u[..., 2] > 0) & (v[..., 2] > 0)
+    y = _mlp(params, _half_diff_inputs(u, v))
+    return jnp.where(valid[..., None], jnp.maximum(y, 0.0), 0.0)
 
 
 def resolve_merl_name(name: str) -> str:

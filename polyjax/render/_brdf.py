@@ -81,9 +81,15 @@ class ChannelsFirst(eqx.Module):
     brdf: BRDF
 
     def __call__(self, u: Array, v: Array) -> Float[Array, "... 3"]:
-        out = jnp.asarray(self.brdf(u, v))
-        out = jnp.moveaxis(out, 0, -1)
-        return jnp.broadcast_to(out, out.shape[:-1] + (3,))
+        return _channels_last(self.brdf, u, v)
+
+
+@eqx.filter_jit
+def _channels_last(brdf, u, v):
+    """:class:`ChannelsFirst`'s evaluation, one compiled program per model family and shapes."""
+    out = jnp.asarray(brdf(u, v))
+    out = jnp.moveaxis(out, 0, -1)
+    return jnp.broadcast_to(out, out.shape[:-1] + (3,))
 
 
 class SwapUV(eqx.Module):

@@ -66,6 +66,7 @@ _QUARTER_PI = 0.25 * np.pi
 # --------------------------------------------------------------------------- the area-preserving map
 
 
+@jax.jit
 def square_to_hemisphere(s: Float[Array, "... 2"]) -> Float[Array, "... 3"]:
     """The map ``M``: ``[0, 1]^2`` to the upper hemisphere, area-preserving (``d omega = 2 pi dA``)."""
     x = 2.0 * s[..., 0] - 1.0
@@ -84,6 +85,7 @@ def square_to_hemisphere(s: Float[Array, "... 2"]) -> Float[Array, "... 3"]:
     return jnp.stack([dx * scale, dy * scale, z], axis=-1)
 
 
+@jax.jit
 def hemisphere_to_square(w: Float[Array, "... 3"]) -> Float[Array, "... 2"]:
     """The inverse of :func:`square_to_hemisphere` for ``w_z >= 0`` (unit vectors)."""
     z = jnp.clip(w[..., 2], 0.0, 1.0)
@@ -253,8 +255,12 @@ class ImportanceSampler(eqx.Module):
         return jnp.stack([(b + sx) * h, (a + sy) * h], axis=-1)
 
     def pdf(self, u: Float[ArrayLike, "... 3"], v: Float[ArrayLike, "... 3"]) -> Float[Array, "..."]:
-        """Solid-angle density of :meth:`warp`'s directions ``u`` for views ``v`` (0 below the horizon)."""
-        u, v = jnp.broadcast_arrays(jnp.asarray(u), jnp.asarray(v))
+        """Solid-angle density of :meth:`warp`'s directions ``u`` for views ``v`` (0 below the horizon); one compiled
+        program per shape."""
+        return _pdf(self, jnp.asarray(u), jnp.asarray(v))
+
+    def _pdf(self, u, v):
+        u, v = jnp.broadcast_arrays(u, v)
         c, s = _azimuth(v)
         sq = hemisphere_to_square(_rotate_z(u, c, -s))
         j, t = self._node(v)
@@ -271,10 +277,13 @@ class ImportanceSampler(eqx.Module):
         the point (``y`` then ``x`` of the square for the table, or the cosine sample); ``xi[2]`` is not used.
 
         Returns:
-            ``(u, pdf)``: ``(..., 3)`` unit directions and their density :meth:`pdf`.
+            ``(u, pdf)``: ``(..., 3)`` unit directions and their density :meth:`pdf`; one compiled program per
+            shape.
         """
         xi = jnp.asarray(xi)
-        v = jnp.asarray(v, xi.dtype)
+        return _warp(self, xi, jnp.asarray(v, xi.dtype))
+
+    def _warp(self, xi, v):
         shape = jnp.broadcast_shapes(xi.shape[:-1], v.shape[:-1])
         xi = jnp.broadcast_to(xi, shape + (5,))
         v = jnp.broadcast_to(v, shape + (3,))
@@ -294,6 +303,16 @@ class ImportanceSampler(eqx.Module):
         v = jnp.asarray(v)
         dtype = v.dtype if jnp.issubdtype(v.dtype, jnp.floating) else jnp.dtype(jnp.result_type(float))
         return _sample(self, key, v.astype(dtype), int(n))
+
+
+@jax.jit
+def _pdf(sampler, u, v):
+    return sampler._pdf(u, v)
+
+
+@jax.jit
+def _warp(sampler, xi, v):
+    return sampler._warp(xi, v)
 
 
 @eqx.filter_jit

@@ -88,6 +88,7 @@ def blend_map(height: int, width: int, n_materials: int = 2, rows: slice | None 
     return np.concatenate([a, 1.0 - a.sum(-1, keepdims=True)], -1)
 
 
+@jax.jit
 def directions(positions: ArrayLike, light: ArrayLike, camera: ArrayLike):
     """``(u, v, distance^2, cos theta_u)`` of texels ``positions (..., 3)`` for lights ``light (K, 3)`` (or
     ``(3,)``): ``u (..., K, 3)``, ``v (..., 3)``."""
