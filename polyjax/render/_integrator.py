@@ -41,6 +41,8 @@ or multiply by exact ones.
 
 from __future__ import annotations
 
+import copy
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -324,9 +326,28 @@ def _paths(objects, p, frame, vl, idx, pix, point_lights, pool, salt, spp, bounc
     return total / spp
 
 
-@eqx.filter_jit
+def without_brdfs(scene: Scene) -> Scene:
+    """``scene`` with every object's BRDF replaced by None: the argument of compiled stages that do not depend on
+    the BRDFs (primary rays, light samples), so that one program serves every BRDF."""
+    return _replaced(scene, objects=tuple(_replaced(o, brdf=None) for o in scene.objects))
+
+
+def _replaced(module: eqx.Module, **fields) -> eqx.Module:
+    """A shallow copy of ``module`` with ``fields`` set (its ``__init__``, which checks and converts, not run)."""
+    new = copy.copy(module)
+    for name, value in fields.items():
+        object.__setattr__(new, name, value)
+    return new
+
+
 def _primary(scene: Scene):
-    """Primary rays: hit points, shading frames, local view directions (one program for every mode)."""
+    """Primary rays: hit points, shading frames, local view directions (one program for every mode and every
+    BRDF: :func:`without_brdfs`)."""
+    return _primary_rays(without_brdfs(scene))
+
+
+@eqx.filter_jit
+def _primary_rays(scene: Scene):
     cam = scene.camera
     o, d = cam.rays()
     o, d = o.astype(scene.background.dtype), d.astype(scene.background.dtype)

@@ -33,6 +33,7 @@ from ._integrator import (
     _to_local,
     _visible,
     cast_floats,
+    without_brdfs,
 )
 from ._scene import Scene, plan_effects
 
@@ -87,7 +88,8 @@ def light_samples(scene: Scene, target: int = 0, *, spp: int = 64, seed: int = 0
     env = scene.environment
     # the pool is drawn outside the compiled function, like the renderer's (the same samples)
     pool = None if env is None else _radiance_pool(env, _pool_size(int(spp)), int(seed), dtype, tables)
-    return _light_samples(scene, pool, int(target), int(spp), int(seed), effects.shadows)
+    # one program for every BRDF of the objects (not used here)
+    return _light_samples(without_brdfs(scene), pool, int(target), int(spp), int(seed), effects.shadows)
 
 
 @eqx.filter_jit
