@@ -464,11 +464,16 @@ def _above_directions(resolution, idx, dtype_name):
 
 @functools.lru_cache(maxsize=4)
 def _above_index(resolution: tuple[int, int, int]) -> np.ndarray:
-    """File-order indices of the bins with both directions above the horizon."""
+    """File-order indices of the bins with both directions above the horizon.
+
+    ``merl_grid`` computes the z components ``dz c - dx s`` (light) and ``dz c + dx s`` (view) of a bin; for finite
+    doubles ``a - b > 0`` iff ``a > b`` and ``a + b > 0`` iff ``a > -b`` (IEEE subtraction is exact in sign,
+    subnormals included), so both are positive iff ``dz c > |dx s|``: the same bins from one ``(N_h, N_d)`` table
+    of ``dz c`` (``dz`` does not depend on ``phi_d``) and one full-size product, a fifth of the work."""
     c, s, dx, _, dz = _grid_tables(resolution)
-    c, s = c[:, None, None], s[:, None, None]
-    # the z components of u and v as merl_grid computes them (the same operations: the same bits)
-    idx = np.flatnonzero((np.subtract(dz * c, dx * s) > 0) & (np.add(dz * c, dx * s) > 0))
+    zc = (c[:, None] * dz[None, :, 0])[:, :, None]  # (N_h, N_d, 1): dz c, the same product as merl_grid's
+    xs = dx[None] * s[:, None, None]  # (N_h, N_d, N_p)
+    idx = np.flatnonzero(zc > np.abs(xs, out=xs))
     idx.setflags(write=False)
     return idx
 
