@@ -100,6 +100,31 @@ def _stream_sum(fn, n: int, block: int, arrays, axes):
     return acc
 
 
+def _stream_map(fn, n: int, block: int, arrays):
+    """``fn(*blocks) -> (rows, sums)`` over the row blocks of ``arrays`` (rows first): the per-row outputs ``rows``
+    (a tuple of arrays, rows last) written into whole ``(..., n)`` arrays (in place, inside one loop) and the
+    ``sums`` added; a loop over full blocks, then the remainder."""
+
+    def take(start, size):
+        return [jax.lax.dynamic_slice_in_dim(a, start, size, axis=0) for a in arrays]
+
+    def put(carry, start, size):
+        rows, sums = fn(*take(start, size))
+        whole, acc = carry
+        whole = tuple(jax.lax.dynamic_update_slice_in_dim(w, r, start, axis=-1) for w, r in zip(whole, rows))
+        return whole, jax.tree.map(jnp.add, acc, sums)
+
+    rows, sums = jax.eval_shape(fn, *take(0, min(block, n)))
+    carry = (tuple(jnp.zeros(r.shape[:-1] + (n,), r.dtype) for r in rows),
+             jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), sums))
+    n_full, rem = divmod(n, block)
+    if n_full:
+        carry = jax.lax.fori_loop(0, n_full, lambda i, c: put(c, i * block, block), carry)
+    if rem:
+        carry = put(carry, n_full * block, rem)
+    return carry
+
+
 def _chol_upper(g):
     r = jnp.linalg.cholesky(g).T
     return r, jnp.all(jnp.isfinite(r)) & jnp.all(jnp.diagonal(r) > 0)
@@ -186,6 +211,32 @@ def stream_rows(x, wl, wc2l, mean, rotation, centre, halfwidth):
     return dict(t=t, sw=sw, wc2=sw * sw, den=jnp.sum(wl), n_used=jnp.sum(wl > 0))
 
 
+def kept_rows(sample, arrays, mean, rotation, centre, halfwidth, *, block=None):
+    """:func:`stream_rows` of every sample, a block of :data:`BLOCK` rows at a time inside one loop (over the whole
+    arrays at once, XLA read the directions several times, at half the speed): the rows a geometry kept on disk
+    (:mod:`polyjax._geometry_store`) needs, from its transform.
+
+    Args:
+        sample: ``(*blocks) -> (x (B, k), w (B,), w cos^2 theta_u (B,))``, the explanatory variables and weights of
+            a block of rows of ``arrays``.
+        arrays: arrays with the samples first (the directions, weights and mask).
+        mean, rotation, centre, halfwidth: the kept transform.
+        block: rows per block (default :data:`BLOCK`).
+
+    Returns:
+        dict of ``t (k, n)``, ``wc2 (n,)`` (``w cos^2 theta_u``, rounded as ``sqrt(.)^2`` like the geometry's), and
+        the samples used and their total weight, ``den`` (checked against the kept geometry's).
+    """
+    block = BLOCK if block is None else int(block)
+
+    def one(*blocks):
+        r = stream_rows(*sample(*blocks), mean, rotation, centre, halfwidth)
+        return (r["t"], r["wc2"]), (r["den"], r["n_used"])
+
+    (t, wc2), (den, n_used) = _stream_map(one, arrays[0].shape[0], block, arrays)
+    return dict(t=t, wc2=wc2, den=den, n_used=n_used)
+
+
 def _equilibrated_cholesky(g, act):
     """Column norms ``E`` (from the diagonal of the Gram matrix ``g``) and ``R_1 = chol(E^{-1} g E^{-1})`` over the
     active columns (a unit diagonal elsewhere), with whether the factor succeeded."""
@@ -245,7 +296,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
             :data:`PRECONDITION_STRIDE`).
 
     Returns:
-        A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``sqrt(w cos^2 theta_u)``, ``G``, and
+        A dict of arrays: the PCA and scaling, ``t`` transposed ``(k, n)``, ``w cos^2 theta_u``, ``G``, and
         per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R``, whether
         the Cholesky factors succeeded, the number of passes over the rows (1 to 3) and whether the preconditioner
         came from the sample of the rows. The same for every material on one grid: :func:`polyjax.fit_polynomial`
@@ -295,7 +346,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
 
     uu, s, vt, g = jax.vmap(finish)(active, r1, r2, scale)
     g = g[jnp.argmax(jnp.sum(active, axis=1))]  # every column active: the degree p itself
-    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, sw=sw, wc2=sw * sw,
+    return dict(mean=pca.mean, rotation=pca.rotation, centre=centre, halfwidth=hw, t=t, wc2=sw * sw,
                 g=g, den=jnp.sum(wl), n_used=jnp.sum(keep), scale=scale, r1inv=r1inv, r2=r2, u=uu, s=s, vt=vt,
                 ok=jnp.all(ok1) & jnp.all(ok2), passes=passes, sampled=~read_all)
 
