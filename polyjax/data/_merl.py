@@ -229,12 +229,13 @@ def _fill_directions(u, v, c, s, x, y, z) -> None:
     """Write into ``u``, ``v`` (``(..., 3)``) the light and view directions of the half-vector elevation with cosine
     ``c`` and sine ``s`` and the difference vector ``(x, y, z)`` (broadcast against ``u[..., 0]``): the rotation of
     :func:`rusinkiewicz_to_directions` (the same operations on the same numbers, so the same bits)."""
-    u[..., 0] = x * c + z * s
+    xc, zs, zc, xs = x * c, z * s, z * c, x * s  # each product once (-a + b and b - a are the same double)
+    np.add(xc, zs, out=u[..., 0])
     u[..., 1] = y
-    u[..., 2] = z * c - x * s
-    v[..., 0] = -x * c + z * s
-    v[..., 1] = -y
-    v[..., 2] = z * c + x * s
+    np.subtract(zc, xs, out=u[..., 2])
+    np.subtract(zs, xc, out=v[..., 0])
+    np.negative(y, out=v[..., 1])
+    np.add(zc, xs, out=v[..., 2])
 
 
 @functools.lru_cache(maxsize=4)
@@ -492,7 +493,8 @@ def _grid_memo(maxsize: int):
 def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set) and an all-True ``(n,)``
     mask; cached: every file on this grid hands out the same arrays (what a fit keeps for the grid is found
-    again by identity)."""
+    again by identity). :func:`load_merl_binary` starts it in a thread (``_device_grid.start``) as soon as a file's
+    header is read, so a process's first load makes the grid while the file is read and its values gathered."""
     import jax
 
     from .._geometry_store import remember_content
