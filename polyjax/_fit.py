@@ -22,7 +22,7 @@ from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._sharding import lane_sharding, shard_lanes
-from ._stream import kept_rows, stream_geometry, streamed_lane, use_stream
+from ._stream import kept_rows, sampled_rows, stream_geometry, streamed_lane, use_stream
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -166,9 +166,10 @@ def _outputs(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
 
 
 def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
-    x = get_variables(variables).fn(inp.u, inp.v)
-    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
-    return stream_geometry(x, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions)
+    """:func:`polyjax._stream.stream_geometry` of the shared samples of ``inp``, their variables and weights made in
+    one loop over the directions (:func:`polyjax._stream.sampled_rows`)."""
+    xt, w, wc2 = sampled_rows(_sample_rows(variables, cutoff_deg), (inp.u, inp.v, inp.weights[0], inp.mask[0]))
+    return stream_geometry(xt.T, w, wc2, active, max_degree=max_degree, basis=basis, interactions=interactions)
 
 
 @functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))

@@ -212,6 +212,20 @@ def stream_rows(x, wl, wc2l, mean, rotation, centre, halfwidth):
     return dict(t=t, sw=sw, wc2=sw * sw, den=jnp.sum(wl), n_used=jnp.sum(wl > 0))
 
 
+def sampled_rows(sample, arrays, *, block=None):
+    """The explanatory variables transposed, ``(k, n)``, and the weights ``w``, ``w cos^2 theta_u`` ``(n,)`` of every
+    sample, a block of :data:`BLOCK` rows at a time inside one loop (``sample`` and ``arrays`` as in
+    :func:`kept_rows`): the inputs of :func:`stream_geometry` in one pass over the directions, the variables already
+    in the ``(k, n)`` layout its reductions read."""
+    block = BLOCK if block is None else int(block)
+
+    def one(*blocks):
+        x, wl, wc2l = sample(*blocks)
+        return (x.T, wl, wc2l), ()
+
+    return _stream_map(one, arrays[0].shape[0], block, arrays)[0]
+
+
 def kept_rows(sample, arrays, mean, rotation, centre, halfwidth, *, block=None):
     """:func:`stream_rows` of every sample, a block of :data:`BLOCK` rows at a time inside one loop (over the whole
     arrays at once, XLA read the directions several times, at half the speed): the rows a geometry kept on disk
