@@ -253,19 +253,24 @@ def _remembered_geometry(inp, degrees, static):
     equal weights and mask) and options, or None."""
     hit = _GEOMETRY_MEMO.get("last")
     if (hit is not None and hit["key"] == _memo_key(inp, degrees, static) and hit["u"]() is inp.u
-            and hit["v"]() is inp.v and np.array_equal(hit["w"], np.asarray(inp.weights))
-            and np.array_equal(hit["m"], np.asarray(inp.mask))):
+            and hit["v"]() is inp.v and _same(hit["w"], inp.weights) and _same(hit["m"], inp.mask)):
         return hit["geo"]
     return None
 
 
+def _same(kept, a) -> bool:
+    return kept is a or np.array_equal(np.asarray(kept), np.asarray(a))
+
+
 def _remember_geometry(inp, degrees, static, geo) -> None:
-    """Keep ``geo`` for the next fit on the same samples and options: one entry, the last one."""
+    """Keep ``geo`` for the next fit on the same samples and options: one entry, the last one (its weights and mask
+    kept as they are when they are JAX arrays, which never change, else copied)."""
     if not is_concrete(geo):
         return
+    keep = lambda a: a if isinstance(a, jax.Array) else np.array(a)  # noqa: E731
     try:
         _GEOMETRY_MEMO["last"] = dict(key=_memo_key(inp, degrees, static), u=weakref.ref(inp.u),
-                                      v=weakref.ref(inp.v), w=np.array(inp.weights), m=np.array(inp.mask), geo=geo)
+                                      v=weakref.ref(inp.v), w=keep(inp.weights), m=keep(inp.mask), geo=geo)
     except TypeError:  # arrays without weak references: not remembered
         _GEOMETRY_MEMO.pop("last", None)
 

@@ -513,17 +513,43 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
 
 def _above_directions(resolution, idx, dtype_name):
     """``merl_grid``'s ``u[idx]``, ``v[idx]`` (the same bits) in aligned ``(len(idx), 3)`` buffers, computed one
-    ``theta_h`` slab at a time from :func:`_grid_tables` (no full-grid arrays: a fresh process's first load)."""
+    ``theta_h`` slab at a time from :func:`_grid_tables` (no full-grid arrays: a fresh process's first load); the
+    slabs of the first half of the bins in a second thread (numpy releases the interpreter lock in its loops)."""
     nh, nd, npd = resolution
     c, s, dx, dy, dz = (a.ravel() if a.ndim > 1 else a for a in _grid_tables(resolution))
     u = _aligned_empty((idx.size, 3), dtype_name)
     v = _aligned_empty((idx.size, 3), dtype_name)
     bounds = np.searchsorted(idx, np.arange(nh + 1) * (nd * npd))
-    for i in range(nh):
-        a, b = bounds[i], bounds[i + 1]
-        sel = idx[a:b] - i * (nd * npd)
-        _fill_directions(u[a:b], v[a:b], c[i], s[i], dx[sel], dy[sel], dz[sel])
+
+    def fill(first, last):
+        for i in range(first, last):
+            a, b = bounds[i], bounds[i + 1]
+            sel = idx[a:b] - i * (nd * npd)
+            _fill_directions(u[a:b], v[a:b], c[i], s[i], dx[sel], dy[sel], dz[sel])
+
+    half = int(np.searchsorted(bounds, idx.size // 2))
+    _in_two_threads(lambda: fill(0, half), lambda: fill(half, nh))
     return u, v
+
+
+def _in_two_threads(first, second) -> None:
+    """``first()`` in a new thread while ``second()`` runs in this one; the first error of either is raised."""
+    errors = []
+
+    def run():
+        try:
+            first()
+        except BaseException as e:  # noqa: BLE001 - raised in the caller's thread below
+            errors.append(e)
+
+    helper = threading.Thread(target=run, name="polyjax-grid-half", daemon=True)
+    helper.start()
+    try:
+        second()
+    finally:
+        helper.join()
+    if errors:
+        raise errors[0]
 
 
 @_grid_memo(maxsize=4)
