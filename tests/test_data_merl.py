@@ -367,3 +367,24 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
     assert calls.count(-1) == 2
     memo(2), memo(3)  # at most maxsize values kept: the oldest dropped
     assert memo(1) is not value and calls.count(1) == 2
+
+
+def test_first_load_in_float32_is_the_grid_rounded(tmp_path):
+    """Without x64 the grid is made in float32 (its own cached arrays): the float64 grid rounded once, weights
+    included, and no warning from the gathers."""
+    import warnings
+
+    import jax
+
+    from polyjax.data import _merl
+
+    path = pj.data.write_merl_binary(tmp_path / "h.binary", np.full((3, pj.data.MERL_N_BINS), 0.25))
+    _merl._device_grid.cache_clear()
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = pj.data.load_merl_binary(path)
+    u, v, w, above = pj.data.merl_grid()
+    assert m.u.dtype == np.float32 and m.weights.dtype == np.float32
+    for got, want in ((m.u, u[above]), (m.v, v[above]), (m.weights, w[above])):
+        assert np.array_equal(np.asarray(got), want.astype(np.float32))
+    _merl._device_grid.cache_clear()

@@ -503,7 +503,11 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     idx = _above_index(resolution)
     u, v = _above_directions(resolution, idx, dtype_name)
     w = _aligned_empty(idx.shape, dtype_name)  # aligned: jax.device_put takes it over without a copy
-    np.take(merl_bin_weights(resolution), idx, out=w, mode="clip")
+    weights = merl_bin_weights(resolution)
+    if w.dtype == weights.dtype:  # gathered in place (numpy buffers a take into another dtype)
+        np.take(weights, idx, out=w, mode="clip")
+    else:
+        np.copyto(w, weights[idx])
     grid = tuple(jax.device_put(a) for a in (u, v, w)) + (jax.device_put(np.ones(idx.size, bool)),)
     remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
     for a, what in zip(grid[:2], "uv"):  # named for the geometry kept on disk: no checksum of their bytes needed
