@@ -244,7 +244,7 @@ def _streamed_fit(inp, degrees, *, static, **options) -> dict:
 _GEOMETRY_MEMO: dict = {}
 
 
-def _memo_key(inp, degrees, static):
+def _memo_key(degrees, static):
     return (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
 
 
@@ -252,7 +252,7 @@ def _remembered_geometry(inp, degrees, static):
     """The geometry :func:`_remember_geometry` kept for the same samples (the same direction arrays by identity,
     equal weights and mask) and options, or None."""
     hit = _GEOMETRY_MEMO.get("last")
-    if (hit is not None and hit["key"] == _memo_key(inp, degrees, static) and hit["u"]() is inp.u
+    if (hit is not None and hit["key"] == _memo_key(degrees, static) and hit["u"]() is inp.u
             and hit["v"]() is inp.v and _same(hit["w"], inp.weights) and _same(hit["m"], inp.mask)):
         return hit["geo"]
     return None
@@ -269,7 +269,7 @@ def _remember_geometry(inp, degrees, static, geo) -> None:
         return
     keep = lambda a: a if isinstance(a, jax.Array) else np.array(a)  # noqa: E731
     try:
-        _GEOMETRY_MEMO["last"] = dict(key=_memo_key(inp, degrees, static), u=weakref.ref(inp.u),
+        _GEOMETRY_MEMO["last"] = dict(key=_memo_key(degrees, static), u=weakref.ref(inp.u),
                                       v=weakref.ref(inp.v), w=keep(inp.weights), m=keep(inp.mask), geo=geo)
     except TypeError:  # arrays without weak references: not remembered
         _GEOMETRY_MEMO.pop("last", None)
