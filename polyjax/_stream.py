@@ -204,8 +204,9 @@ def _root_weights(wc2l):
 
 def stream_rows(x, wl, wc2l, mean, rotation, centre, halfwidth):
     """The per-sample part of :func:`stream_geometry` given its transform (a geometry kept on disk,
-    :mod:`polyjax._geometry_store`): ``t (k, n)``, ``sqrt(w cos^2 theta_u)`` and its square, and the samples used
-    and their weight (checked against the kept geometry's)."""
+    :mod:`polyjax._geometry_store`), of the samples ``x`` (a block of them in :func:`kept_rows`): ``t (k, n)``,
+    ``sqrt(w cos^2 theta_u)`` and its square, and the samples used and their weight (checked against the kept
+    geometry's)."""
     pos = wc2l > 0
     t = _scale(_rotate(x.T, mean, rotation), centre, halfwidth, pos)
     sw = _root_weights(wc2l)
