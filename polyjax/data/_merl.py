@@ -670,7 +670,8 @@ def load_merl_binary(
         raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
     source = (f"MERL .binary {', '.join(p.name for p in plist)}"
               + (f" (subsample {subsample}, seed {seed})" if subsample else ""))
-    # the grid's bins, directions and weights (the first load of a process) made in a thread while the file is read
+    # the grid's bins, directions and weights (the first load of a process) made in a thread while the file is read;
+    # files with bins missing in every lane use other arrays (merl_grid's), and the grid made is kept for later loads
     dtype_name = _default_float_name()
     on_header = None if subsample is not None else lambda r: _device_grid.start(r, dtype_name)
     if len(plist) == 1:  # read into the reused buffer, gathered from before the lock is released
