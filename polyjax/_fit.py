@@ -235,10 +235,11 @@ def _streamed_fit(inp, degrees, *, static, **options) -> dict:
                 _remember_geometry(inp, degrees, static, {**kept, "t": rows["t"], "wc2": rows["wc2"]})
                 return out
     geo = _geometry_kernel(inp, degrees, **static)
-    if key is not None:
-        store.save(folder, key, geo)
     _remember_geometry(inp, degrees, static, geo)
-    return kernel(inp, degrees, stream=True, geometry=geo)
+    out = kernel(inp, degrees, stream=True, geometry=geo)
+    if key is not None:  # written while the fit runs (the kernel returns before its result is ready)
+        store.save(folder, key, geo)
+    return out
 
 
 _GEOMETRY_MEMO: dict = {}
