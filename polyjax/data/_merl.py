@@ -546,12 +546,12 @@ def _in_two_threads(first, second) -> None:
         except BaseException as e:  # noqa: BLE001 - raised in the caller's thread below
             errors.append(e)
 
-    helper = threading.Thread(target=run, name="polyjax-grid-half", daemon=True)
-    helper.start()
+    thread = threading.Thread(target=run, name="polyjax-grid-half", daemon=True)
+    thread.start()
     try:
         second()
     finally:
-        helper.join()
+        thread.join()
     if errors:
         raise errors[0]
 
