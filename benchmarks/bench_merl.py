@@ -10,13 +10,16 @@ pass over its values, two when the refining pass is needed).
 
 The first material in a process also pays for everything a process does once per grid: the grid's directions and
 weights (``merl_grid``), their device copies, and the fit's geometry. It is timed by forgetting all of that before
-each timed call (every per-process memo: the grid caches of ``polyjax/data/_merl.py``, the remembered unit
-directions of ``polyjax/_inputs.py`` and the geometry of ``polyjax/_fit.py``); compiled programs stay compiled
-(compilation is ``bench_latency.py``'s subject). Two first materials: cold, with no geometry kept on disk (it is
-computed, then written), and warm, with the geometry an earlier process kept beside the compilation cache
-(``polyjax/_geometry_store.py``: read, checked, and completed by one pass over the rows). This run's compilation
-cache, and so that geometry, is in a temporary folder. The dense fit (the path a traced, differentiable call takes;
-here the same call under ``jax.jit``) is timed beside them too, and the two L2 must agree to 1e-10 (relative).
+each timed call (every per-process memo: the grid caches of ``polyjax/data/_merl.py`` and its reused read buffer,
+the remembered unit directions of ``polyjax/_inputs.py`` and the geometry of ``polyjax/_fit.py``); compiled
+programs stay compiled (compilation is ``bench_latency.py``'s subject). The loader makes the grid in a thread while
+the file is read and gathered, its directions in two threads (the machine's two cores). Two first materials: cold,
+with no geometry kept on disk (it is computed, then written), and warm, with the geometry an earlier process kept
+beside the compilation cache (``polyjax/_geometry_store.py``: read and checked; its per-sample rows are made inside
+the fit's program, which then checks the samples used and their total weight against the kept ones before its fit
+is used). This run's compilation cache, and so that geometry, is in a temporary folder. The dense fit (the path a
+traced, differentiable call takes; here the same call under ``jax.jit``) is timed beside them too, and the two L2
+must agree to 1e-10 (relative).
 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_merl.py [n_materials]``
 """
@@ -47,9 +50,11 @@ def best_of(fn, repeat=5):  # the same count for the floor and every timed step 
 
 
 def forget_grid_work():
-    """Drop every per-process memo of the MERL grid's work, as in a fresh process (compiled programs stay)."""
+    """Drop every per-process memo of the MERL grid's work, as in a fresh process (compiled programs stay), and the
+    loader's reused read buffer (a fresh process allocates it)."""
     for cached in (_merl.merl_grid, _merl._device_grid, _merl._above_index):
         cached.cache_clear()
+    _merl._SCRATCH.clear()
     _inputs._UNIT_MEMO.clear()
     _fit._GEOMETRY_MEMO.clear()
 

@@ -22,7 +22,7 @@ from ._metrics import fit_weights
 from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._sharding import lane_sharding, shard_lanes
-from ._stream import stream_geometry, stream_rows, streamed_lane, use_stream
+from ._stream import kept_rows, sampled_rows, stream_geometry, streamed_lane, use_stream
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -166,9 +166,10 @@ def _outputs(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
 
 
 def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
-    x = get_variables(variables).fn(inp.u, inp.v)
-    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
-    return stream_geometry(x, w[0], wc2[0], active, max_degree=max_degree, basis=basis, interactions=interactions)
+    """:func:`polyjax._stream.stream_geometry` of the shared samples of ``inp``, their variables and weights made in
+    one loop over the directions (:func:`polyjax._stream.sampled_rows`)."""
+    xt, w, wc2 = sampled_rows(_sample_rows(variables, cutoff_deg), (inp.u, inp.v, inp.weights[0], inp.mask[0]))
+    return stream_geometry(xt.T, w, wc2, active, max_degree=max_degree, basis=basis, interactions=interactions)
 
 
 @functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))
@@ -179,57 +180,100 @@ def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions
     return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
 
 
-@functools.partial(jax.jit, static_argnames=("variables", "cutoff_deg"))
-def _rows_kernel(inp, mean, rotation, centre, halfwidth, *, variables, cutoff_deg):
-    """The per-sample rows of a geometry kept on disk (:func:`polyjax._stream.stream_rows`), compiled alone."""
-    x = get_variables(variables).fn(inp.u, inp.v)
-    w, wc2 = fit_weights(inp.u, inp.v, inp.weights, inp.mask, cutoff_deg)
-    return stream_rows(x, w[0], wc2[0], mean, rotation, centre, halfwidth)
+def _sample_rows(variables, cutoff_deg):
+    """``(u, v, w, mask) -> (x, w, w cos^2 theta_u)`` of a block of samples (:func:`polyjax._stream.kept_rows`)."""
+    var_fn = get_variables(variables).fn
+
+    def sample(u, v, w, m):
+        wl, wc2l = fit_weights(u, v, w, m, cutoff_deg)
+        return var_fn(u, v), wl, wc2l
+
+    return sample
 
 
-def _kept_or_new_geometry(inp, degrees, static):
-    """:func:`_geometry_kernel`, or the geometry kept on disk for these samples and options when the compilation
-    cache is on (``polyjax/_geometry_store.py``: found by a hash of everything it depends on, checked, never
-    trusted otherwise), completed by one pass over the rows; a new geometry is written there."""
+@functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "method", "rcond",
+                                             "cutoff_deg", "batch", "scalar", "lane_block"))
+def _kept_fit_kernel(inp: PreparedInputs, degrees, kept: dict, *, variables, cutoff_deg, **static):
+    """The first streamed fit on a geometry kept on disk (its small fields ``kept``), in one program: the per-sample
+    rows from the kept transform (:func:`polyjax._stream.kept_rows`), then :func:`_fit_kernel` on the completed
+    geometry. Returns ``(outputs, rows)``; the caller uses the outputs only if the rows' samples used and total
+    weight are the kept geometry's (:func:`_streamed_fit`)."""
+    rows = kept_rows(_sample_rows(variables, cutoff_deg), (inp.u, inp.v, inp.weights[0], inp.mask[0]),
+                     *(kept[f] for f in ("mean", "rotation", "centre", "halfwidth")))
+    geo = {**kept, "t": rows["t"], "wc2": rows["wc2"]}
+    out = _fit_kernel(inp, degrees, variables=variables, cutoff_deg=cutoff_deg, stream=True, geometry=geo, **static)
+    return out, rows
+
+
+def _kept_rows_match(rows, kept) -> bool:
+    """Whether the rows of a kept geometry have its samples used and total weight (to rounding: ``1e-12``)."""
+    return int(rows["n_used"]) == int(kept["n_used"]) and np.allclose(rows["den"], kept["den"], rtol=1e-12, atol=0)
+
+
+def _streamed_fit(inp, degrees, *, static, **options) -> dict:
+    """:func:`_fit_kernel` streamed, on the geometry of these samples and options: the one this process made last
+    (:func:`_remembered_geometry`), else the one kept on disk when the compilation cache is on
+    (``polyjax/_geometry_store.py``: found by a hash of everything it depends on, checked, never trusted
+    otherwise; its per-sample rows are made inside the fit's program, :func:`_kept_fit_kernel`, and the fit is kept
+    only if they have the samples used and total weight of the kept geometry), else a new one (written there)."""
+    degrees = np.asarray(degrees, np.int32)
+    kernel = functools.partial(_fit_kernel, method=options["method"], rcond=options["rcond"], batch=inp.batch,
+                               scalar=options["scalar"], lane_block=options["lane_block"], **static)
+    geo = _remembered_geometry(inp, degrees, static)
+    if geo is not None:
+        return kernel(inp, degrees, stream=True, geometry=geo)
     folder = store.store_folder()
-    if folder is None:
-        return _geometry_kernel(inp, degrees, **static)
-    key = store.geometry_key(inp, degrees, static)
-    k = get_variables(static["variables"]).k
-    m = n_terms(k, static["max_degree"], static["interactions"])
-    kept = store.load(folder, key, store.template(k, m, len(degrees), inp.u.dtype))
-    if kept is not None:
-        rows = _rows_kernel(inp, *(kept[f] for f in ("mean", "rotation", "centre", "halfwidth")),
-                            variables=static["variables"], cutoff_deg=static["cutoff_deg"])
-        if int(rows["n_used"]) == int(kept["n_used"]) and np.allclose(rows["den"], kept["den"], rtol=1e-12, atol=0):
-            return {**{f: jnp.asarray(a) for f, a in kept.items()}, "t": rows["t"], "sw": rows["sw"],
-                    "wc2": rows["wc2"]}
+    key = None if folder is None else store.geometry_key(inp, degrees, static)
+    if key is not None:
+        k = get_variables(static["variables"]).k
+        m = n_terms(k, static["max_degree"], static["interactions"])
+        kept = store.load(folder, key, store.template(k, m, len(degrees), inp.u.dtype))
+        if kept is not None:
+            kept = {f: jnp.asarray(a) for f, a in kept.items()}
+            out, rows = _kept_fit_kernel(inp, degrees, kept, batch=inp.batch, **options, **static)
+            if _kept_rows_match(rows, kept):
+                _remember_geometry(inp, degrees, static, {**kept, "t": rows["t"], "wc2": rows["wc2"]})
+                return out
     geo = _geometry_kernel(inp, degrees, **static)
-    store.save(folder, key, geo)
-    return geo
+    _remember_geometry(inp, degrees, static, geo)
+    out = kernel(inp, degrees, stream=True, geometry=geo)
+    if key is not None:  # written while the fit runs (the kernel returns before its result is ready)
+        store.save(folder, key, geo)
+    return out
 
 
 _GEOMETRY_MEMO: dict = {}
 
 
-def _streamed_geometry(inp, degrees, **static):
-    """The geometry of a streamed fit, remembered for the next fit on the same samples (the same direction arrays
-    by identity, equal weights and mask, the same options): one entry, the last one."""
-    key = (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
+def _memo_key(degrees, static):
+    return (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
+
+
+def _remembered_geometry(inp, degrees, static):
+    """The geometry :func:`_remember_geometry` kept for the same samples (the same direction arrays by identity,
+    equal weights and mask) and options, or None."""
     hit = _GEOMETRY_MEMO.get("last")
-    w, m = np.asarray(inp.weights), np.asarray(inp.mask)
-    if (hit is not None and hit["key"] == key and hit["u"]() is inp.u and hit["v"]() is inp.v
-            and np.array_equal(hit["w"], w) and np.array_equal(hit["m"], m)):
+    if (hit is not None and hit["key"] == _memo_key(degrees, static) and hit["u"]() is inp.u
+            and hit["v"]() is inp.v and _same(hit["w"], inp.weights) and _same(hit["m"], inp.mask)):
         return hit["geo"]
-    geo = _kept_or_new_geometry(inp, np.asarray(degrees, np.int32), static)
+    return None
+
+
+def _same(kept, a) -> bool:
+    return kept is a or np.array_equal(np.asarray(kept), np.asarray(a))
+
+
+def _remember_geometry(inp, degrees, static, geo) -> None:
+    """Keep ``geo`` for the next fit on the same samples and options: one entry, the last one (its weights and mask
+    kept as they are when they are JAX arrays, which never change, else copied)."""
     if not is_concrete(geo):
-        return geo
+        return
+    keep = lambda a: a if isinstance(a, jax.Array) else np.array(a)  # noqa: E731
     try:
-        _GEOMETRY_MEMO["last"] = dict(key=key, u=weakref.ref(inp.u), v=weakref.ref(inp.v), w=w.copy(), m=m.copy(),
-                                      geo=geo)
+        _GEOMETRY_MEMO["last"] = dict(key=_memo_key(degrees, static), u=weakref.ref(inp.u),
+                                      v=weakref.ref(inp.v), w=keep(inp.weights), m=keep(inp.mask), geo=geo)
     except TypeError:  # arrays without weak references: not remembered
         _GEOMETRY_MEMO.pop("last", None)
-    return geo
 
 
 def _check_options(basis, method, rank_deficient, degree, lane_block):
@@ -367,9 +411,11 @@ def _run_kernel(inp: PreparedInputs, degrees, sharded, m: int, *, scalar, method
         # streamed only on the shared design (one set of samples for every lane, never per-lane directions)
         stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
                             is_concrete(inp.u, inp.v, inp.values, inp.weights, inp.mask))
-        geometry = _streamed_geometry(inp, degrees, **static) if stream else None
+        if stream:
+            return _streamed_fit(inp, degrees, static=static, method=method, rcond=rcond, scalar=scalar,
+                                 lane_block=lane_block)
         return _fit_kernel(inp, np.asarray(degrees, np.int32), method=method, rcond=rcond, batch=inp.batch,
-                           scalar=scalar, stream=stream, geometry=geometry, lane_block=lane_block, **static)
+                           scalar=scalar, stream=False, lane_block=lane_block, **static)
     kernel = functools.partial(_fit_kernel, method=method, rcond=rcond, batch=None, scalar=False, stream=False,
                                lane_block=lane_block, **static)
     out = shard_lanes(kernel, *sharded, inp, jnp.asarray(degrees, jnp.int32))

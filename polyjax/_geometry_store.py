@@ -3,7 +3,8 @@ it has seen before (a MERL material: every ``.binary`` file has the same directi
 
 The geometry (:func:`polyjax._stream.stream_geometry`) of a grid is a few ``m x m`` matrices (the PCA and scaling,
 the CholeskyQR2 factors, the SVD of ``R``, ``G``) besides the per-sample rows, which are recomputed from the
-directions in one pass (:func:`polyjax._stream.stream_rows`). It is kept in ``<cache folder>/polyjax-geometry/``,
+directions inside the first fit's program, block by block before its pass over the values
+(:func:`polyjax._stream.kept_rows`). It is kept in ``<cache folder>/polyjax-geometry/``,
 the folder of JAX's persistent compilation cache when that is on (:func:`polyjax.enable_compilation_cache`; on by
 default in the command line), and never otherwise; ``POLYJAX_CACHE=off`` or ``POLYJAX_SAVED_GEOMETRY=off`` turns
 it off.
@@ -14,8 +15,9 @@ about one and a half times the time to copy them; arrays a loader made from its 
 directions, are named instead, :func:`remember_content`), their shapes and dtypes, the fit's options and degrees, the
 versions of JAX and jaxlib and polyjax's source files. A file is used only when it holds that key, a checksum of
 its arrays that matches, the shapes and dtypes the geometry has, finite numbers, and the same samples used and
-total weight as the pass over the rows finds; anything else (a missing, stale, damaged or foreign file) is
-ignored and the geometry is computed and written again. Nothing here is ever an error.
+total weight as the rows made in the fit's program (a fit whose rows disagree is thrown away); anything else (a
+missing, stale, damaged or foreign file) is ignored and the geometry is computed and written again. Nothing here is
+ever an error.
 """
 
 from __future__ import annotations

@@ -297,3 +297,94 @@ def test_device_grid_is_the_grid_above_the_horizon_bit_for_bit():
     for got, want in ((du, u[above]), (dv, v[above]), (dw, w[above])):
         assert np.array_equal(np.asarray(got), want)
     assert mask.shape == (int(above.sum()),) and bool(np.all(np.asarray(mask)))
+
+
+@pytest.mark.parametrize("resolution", [(90, 90, 180), (7, 5, 12), (16, 11, 9)])
+def test_above_index_is_the_grid_above_the_horizon(resolution):
+    """The loader's above-horizon bins (``dz c > |dx s|``) are exactly ``merl_grid``'s (both z components
+    positive), at MERL's resolution and odd small ones."""
+    from polyjax.data import _merl
+
+    _merl._above_index.cache_clear()
+    assert np.array_equal(_merl._above_index(resolution), np.flatnonzero(pj.data.merl_grid(resolution)[3]))
+
+
+def test_first_load_makes_the_grid_beside_the_read_with_the_same_bits(tmp_path):
+    """The first load of a process (every grid memo forgotten) makes the grid in a thread while the file is read:
+    the Measurements are those of a later load, bit for bit, and the directions are ``merl_grid``'s above the
+    horizon; a later load hands out the same device arrays."""
+    from polyjax.data import _merl
+
+    rng = np.random.default_rng(3)
+    path = pj.data.write_merl_binary(tmp_path / "r.binary", rng.uniform(0.0, 1.0, (3, pj.data.MERL_N_BINS)))
+    for cached in (_merl._device_grid, _merl._above_index):
+        cached.cache_clear()
+    first = pj.data.load_merl_binary(path)
+    later = pj.data.load_merl_binary(path)
+    u, v, w, above = pj.data.merl_grid()
+    assert first.u is later.u and first.v is later.v and first.weights is later.weights
+    for got, want in ((first.u, u[above]), (first.v, v[above]), (first.weights, w[above])):
+        assert np.array_equal(np.asarray(got), want)
+    raw, _ = pj.data.read_merl_binary(path)
+    assert np.array_equal(np.asarray(first.values), raw[:, above]) and first.n_samples == int(above.sum())
+
+
+def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
+    """A call while the background computation of the same arguments is under way waits for it (the work is done
+    once, the same value returned); an error there is raised by the caller's call, and not remembered."""
+    import threading
+
+    from polyjax.data import _merl
+
+    calls, started, release = [], threading.Event(), threading.Event()
+
+    def slow(x):
+        calls.append(x)
+        started.set()
+        assert release.wait(10.0)
+        if x < 0:
+            raise ValueError(f"x: expected >= 0, found {x}")
+        return [x]
+
+    def under_way(x):  # start x in the background and wait until its work has begun
+        started.clear()
+        release.clear()
+        memo.start(x)
+        memo.start(x)  # under way: not started again
+        assert started.wait(10.0)
+        threading.Timer(0.1, release.set).start()
+
+    memo = _merl._GridMemo(slow, maxsize=2)
+    under_way(1)
+    value = memo(1)
+    assert value == [1] and memo(1) is value and calls == [1]
+    under_way(-1)
+    with pytest.raises(ValueError, match="x: expected >= 0"):
+        memo(-1)
+    assert calls.count(-1) == 1
+    with pytest.raises(ValueError):
+        memo(-1)  # computed again, not a remembered failure
+    assert calls.count(-1) == 2
+    memo(2), memo(3)  # at most maxsize values kept: the oldest dropped
+    assert memo(1) is not value and calls.count(1) == 2
+
+
+def test_first_load_in_float32_is_the_grid_rounded(tmp_path):
+    """Without x64 the grid is made in float32 (its own cached arrays): the float64 grid rounded once, weights
+    included, and no warning from the gathers."""
+    import warnings
+
+    import jax
+
+    from polyjax.data import _merl
+
+    path = pj.data.write_merl_binary(tmp_path / "h.binary", np.full((3, pj.data.MERL_N_BINS), 0.25))
+    _merl._device_grid.cache_clear()
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = pj.data.load_merl_binary(path)
+    u, v, w, above = pj.data.merl_grid()
+    assert m.u.dtype == np.float32 and m.weights.dtype == np.float32
+    for got, want in ((m.u, u[above]), (m.v, v[above]), (m.weights, w[above])):
+        assert np.array_equal(np.asarray(got), want.astype(np.float32))
+    _merl._device_grid.cache_clear()

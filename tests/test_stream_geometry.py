@@ -231,3 +231,48 @@ def test_kept_fields_template_is_the_geometry_shape(variables, degrees):
     want = store.template(k, n_terms(k, max(degrees), False), len(degrees), inp.u.dtype)
     assert {f: (shapes[f].shape, shapes[f].dtype) for f in store.FIELDS} == {
         f: (want[f].shape, want[f].dtype) for f in store.FIELDS}
+
+
+def test_kept_rows_block_by_block_are_the_whole_rows():
+    """The rows of a kept transform made block by block (5 blocks and a remainder) are those made over the whole
+    arrays at once: ``t`` and ``w cos^2 theta_u`` bit for bit, the samples used exactly, the total weight to
+    rounding (summed in another order)."""
+    u, v, weights = _problem(9)
+    weights[::7] = 0.0
+    mask = np.ones(N, bool)
+    mask[3::11] = False
+    geo, _ = _geometry(u, v, weights)
+    transform = [geo[f] for f in ("mean", "rotation", "centre", "halfwidth")]
+
+    def sample(u, v, w, m):
+        wl, wc2l = pj.fit_weights(u, v, w, m, 80.0)
+        return pj.explanatory_variables("lafortune", u, v), wl, wc2l
+
+    whole = jax.jit(lambda *a: stream_mod.stream_rows(*sample(*a), *transform))(u, v, weights, mask)
+    blocks = jax.jit(lambda *a: stream_mod.kept_rows(sample, a, *transform, block=512))(u, v, weights, mask)
+    assert np.array_equal(blocks["t"], whole["t"]) and np.array_equal(blocks["wc2"], whole["wc2"])
+    assert int(blocks["n_used"]) == int(whole["n_used"]) == int(np.sum((weights > 0) & mask
+                                                                      & (np.asarray(whole["wc2"]) > 0)))
+    np.testing.assert_allclose(blocks["den"], whole["den"], rtol=1e-14)
+
+
+def test_fit_after_a_kept_geometry_reuses_its_rows(kept):
+    """The first fit on a kept geometry makes its rows inside the fit's program; the next fit on the same samples
+    uses that completed geometry (nothing computed or read again) and agrees with a fit on the cold geometry."""
+    import polyjax._fit as fit_mod
+
+    computed, folder = kept
+    u, v, weights = _problem(10)
+    values = _values(u, v)
+    u, v = jnp.asarray(u), jnp.asarray(v)  # the same device arrays for every fit (as a loader's grid)
+    cold = _fit_fresh(u, v, values, weights)
+    warm = _fit_fresh(u, v, values, weights)
+    geo = fit_mod._GEOMETRY_MEMO["last"]["geo"]
+    assert len(computed) == 1 and set(geo) >= {"t", "wc2"} and "sw" not in geo
+    for path in folder.glob("geometry-*.npz"):
+        path.unlink()  # the memo, not the disk, serves the next fit
+    later = pj.fit_polynomial(u, v, values * 2.0, "lafortune", 4, weights=weights)
+    assert len(computed) == 1 and fit_mod._GEOMETRY_MEMO["last"]["geo"] is geo
+    np.testing.assert_allclose(warm.l2, cold.l2, rtol=1e-14)
+    np.testing.assert_allclose(later.l2, 2.0 * cold.l2, rtol=1e-13)
+    np.testing.assert_allclose(later.coefficients, 2.0 * cold.coefficients, rtol=1e-12, atol=1e-14)

@@ -46,6 +46,7 @@ to within 0.1 % at MERL's resolution (the horizon cuts cells; checked in the tes
 
 from __future__ import annotations
 
+import concurrent.futures
 import functools
 import os
 import threading
@@ -228,12 +229,13 @@ def _fill_directions(u, v, c, s, x, y, z) -> None:
     """Write into ``u``, ``v`` (``(..., 3)``) the light and view directions of the half-vector elevation with cosine
     ``c`` and sine ``s`` and the difference vector ``(x, y, z)`` (broadcast against ``u[..., 0]``): the rotation of
     :func:`rusinkiewicz_to_directions` (the same operations on the same numbers, so the same bits)."""
-    u[..., 0] = x * c + z * s
+    xc, zs, zc, xs = x * c, z * s, z * c, x * s  # each product once (-a + b and b - a are the same double)
+    np.add(xc, zs, out=u[..., 0])
     u[..., 1] = y
-    u[..., 2] = z * c - x * s
-    v[..., 0] = -x * c + z * s
-    v[..., 1] = -y
-    v[..., 2] = z * c + x * s
+    np.subtract(zc, xs, out=u[..., 2])
+    np.subtract(zs, xc, out=v[..., 0])
+    np.negative(y, out=v[..., 1])
+    np.add(zc, xs, out=v[..., 2])
 
 
 @functools.lru_cache(maxsize=4)
@@ -287,9 +289,10 @@ def read_merl_binary(
     return raw, res
 
 
-def _read_raw(path, scratch: dict | None) -> tuple[np.ndarray, tuple[int, int, int]]:
+def _read_raw(path, scratch: dict | None, on_header=None) -> tuple[np.ndarray, tuple[int, int, int]]:
     """The checked ``(3, N)`` stored numbers of a ``.binary`` file: a fresh array, or, with ``scratch`` (a dict
-    holding a reusable buffer, see :data:`_SCRATCH`), read into that buffer (no fresh pages to fault in)."""
+    holding a reusable buffer, see :data:`_SCRATCH`), read into that buffer (no fresh pages to fault in).
+    ``on_header(resolution)`` is called once the header and size are checked, before the body is read."""
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"MERL .binary file {str(path)!r}: no such file")
@@ -297,6 +300,8 @@ def _read_raw(path, scratch: dict | None) -> tuple[np.ndarray, tuple[int, int, i
         size = os.fstat(f.fileno()).st_size
         head = f.read(256)
         res, n = _check_header(path, head, size)
+        if on_header is not None:
+            on_header(res)
         f.seek(_HEADER_BYTES)
         if scratch is None:
             raw = np.fromfile(f, dtype="<f8", count=3 * n)
@@ -426,11 +431,70 @@ def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarr
     return np.sort(rng.choice(idx, size=count, replace=False))
 
 
-@functools.lru_cache(maxsize=2)
+class _GridMemo:
+    """A per-process memo of a grid function of hashable arguments (``lru_cache``'s role: the same arrays for every
+    file on a grid), whose value may also be computed in a background thread (:meth:`start`): a call while that
+    computation is under way waits for it instead of doing the work again. The oldest of more than ``maxsize``
+    values is dropped; :meth:`cache_clear` forgets every value (as a fresh process)."""
+
+    def __init__(self, fn, maxsize: int):
+        functools.update_wrapper(self, fn)
+        self._fn, self._maxsize = fn, maxsize
+        self._futures: dict = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, *args):
+        with self._lock:
+            fut = self._futures.get(args)
+            mine = fut is None
+            if mine:
+                fut = self._futures[args] = concurrent.futures.Future()
+                done = [k for k, f in self._futures.items() if f.done()]
+                for k in done[: max(0, len(self._futures) - self._maxsize)]:
+                    del self._futures[k]
+        if not mine:
+            return fut.result()
+        try:
+            value = self._fn(*args)
+        except BaseException as e:
+            with self._lock:
+                self._futures.pop(args, None)
+            fut.set_exception(e)
+            raise
+        fut.set_result(value)
+        return value
+
+    def start(self, *args) -> None:
+        """Compute the value of ``args`` in a daemon thread unless it is known or under way (numpy releases the
+        interpreter lock in its array loops, so the work runs beside the caller's, e.g. a file being read). An
+        error there is raised again by the caller's own call."""
+        with self._lock:
+            if args in self._futures:
+                return
+
+        def run():
+            try:
+                self(*args)
+            except BaseException:  # noqa: BLE001 - the caller's own call raises it
+                pass
+
+        threading.Thread(target=run, name=f"polyjax-{self._fn.__name__}", daemon=True).start()
+
+    def cache_clear(self) -> None:
+        with self._lock:
+            self._futures.clear()
+
+
+def _grid_memo(maxsize: int):
+    return lambda fn: _GridMemo(fn, maxsize)
+
+
+@_grid_memo(maxsize=2)
 def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set) and an all-True ``(n,)``
     mask; cached: every file on this grid hands out the same arrays (what a fit keeps for the grid is found
-    again by identity)."""
+    again by identity). :func:`load_merl_binary` starts it in a thread (``_device_grid.start``) as soon as a file's
+    header is read, so a process's first load makes the grid while the file is read and its values gathered."""
     import jax
 
     from .._geometry_store import remember_content
@@ -439,7 +503,11 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     idx = _above_index(resolution)
     u, v = _above_directions(resolution, idx, dtype_name)
     w = _aligned_empty(idx.shape, dtype_name)  # aligned: jax.device_put takes it over without a copy
-    np.copyto(w, merl_bin_weights(resolution)[idx])
+    weights = merl_bin_weights(resolution)
+    if w.dtype == weights.dtype:  # gathered in place (numpy buffers a take into another dtype)
+        np.take(weights, idx, out=w, mode="clip")
+    else:
+        np.copyto(w, weights[idx])
     grid = tuple(jax.device_put(a) for a in (u, v, w)) + (jax.device_put(np.ones(idx.size, bool)),)
     remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
     for a, what in zip(grid[:2], "uv"):  # named for the geometry kept on disk: no checksum of their bytes needed
@@ -449,26 +517,57 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
 
 def _above_directions(resolution, idx, dtype_name):
     """``merl_grid``'s ``u[idx]``, ``v[idx]`` (the same bits) in aligned ``(len(idx), 3)`` buffers, computed one
-    ``theta_h`` slab at a time from :func:`_grid_tables` (no full-grid arrays: a fresh process's first load)."""
+    ``theta_h`` slab at a time from :func:`_grid_tables` (no full-grid arrays: a fresh process's first load); the
+    slabs of the first half of the bins in a second thread (numpy releases the interpreter lock in its loops)."""
     nh, nd, npd = resolution
     c, s, dx, dy, dz = (a.ravel() if a.ndim > 1 else a for a in _grid_tables(resolution))
     u = _aligned_empty((idx.size, 3), dtype_name)
     v = _aligned_empty((idx.size, 3), dtype_name)
     bounds = np.searchsorted(idx, np.arange(nh + 1) * (nd * npd))
-    for i in range(nh):
-        a, b = bounds[i], bounds[i + 1]
-        sel = idx[a:b] - i * (nd * npd)
-        _fill_directions(u[a:b], v[a:b], c[i], s[i], dx[sel], dy[sel], dz[sel])
+
+    def fill(first, last):
+        for i in range(first, last):
+            a, b = bounds[i], bounds[i + 1]
+            sel = idx[a:b] - i * (nd * npd)
+            _fill_directions(u[a:b], v[a:b], c[i], s[i], dx[sel], dy[sel], dz[sel])
+
+    half = int(np.searchsorted(bounds, idx.size // 2))
+    _in_two_threads(lambda: fill(0, half), lambda: fill(half, nh))
     return u, v
 
 
-@functools.lru_cache(maxsize=4)
+def _in_two_threads(first, second) -> None:
+    """``first()`` in a new thread while ``second()`` runs in this one; the first error of either is raised."""
+    errors = []
+
+    def run():
+        try:
+            first()
+        except BaseException as e:  # noqa: BLE001 - raised in the caller's thread below
+            errors.append(e)
+
+    thread = threading.Thread(target=run, name="polyjax-grid-half", daemon=True)
+    thread.start()
+    try:
+        second()
+    finally:
+        thread.join()
+    if errors:
+        raise errors[0]
+
+
+@_grid_memo(maxsize=4)
 def _above_index(resolution: tuple[int, int, int]) -> np.ndarray:
-    """File-order indices of the bins with both directions above the horizon."""
+    """File-order indices of the bins with both directions above the horizon.
+
+    ``merl_grid`` computes the z components ``dz c - dx s`` (light) and ``dz c + dx s`` (view) of a bin; for finite
+    doubles ``a - b > 0`` iff ``a > b`` and ``a + b > 0`` iff ``a > -b`` (IEEE subtraction is exact in sign,
+    subnormals included), so both are positive iff ``dz c > |dx s|``: the same bins from one ``(N_h, N_d)`` table
+    of ``dz c`` (``dz`` does not depend on ``phi_d``) and one full-size product, a fifth of the work."""
     c, s, dx, _, dz = _grid_tables(resolution)
-    c, s = c[:, None, None], s[:, None, None]
-    # the z components of u and v as merl_grid computes them (the same operations: the same bits)
-    idx = np.flatnonzero((np.subtract(dz * c, dx * s) > 0) & (np.add(dz * c, dx * s) > 0))
+    zc = (c[:, None] * dz[None, :, 0])[:, :, None]  # (N_h, N_d, 1): dz c, the same product as merl_grid's
+    xs = dx[None] * s[:, None, None]  # (N_h, N_d, N_p)
+    idx = np.flatnonzero(zc > np.abs(xs, out=xs))
     idx.setflags(write=False)
     return idx
 
@@ -483,6 +582,13 @@ def _aligned_empty(shape, dtype) -> np.ndarray:
     return buf[start:start + count * dtype.itemsize].view(dtype).reshape(shape)
 
 
+def _default_float_name() -> str:
+    """The name of JAX's default float dtype (``float64`` with x64 on), the dtype of the loaders' arrays."""
+    import jax.numpy as jnp
+
+    return jnp.dtype(jnp.result_type(float)).name
+
+
 def _merl_measurements(values, resolution, *, subsample, seed, names, source, scale=None) -> Measurements:
     """values ``(m, 3, N)`` (negative = missing) -> Measurements over the kept bins; ``scale`` ``(3,)`` multiplies
     the kept values (the stored numbers of a ``.binary`` file are scaled after the gather). The mask is ``(n,)``
@@ -494,7 +600,9 @@ def _merl_measurements(values, resolution, *, subsample, seed, names, source, sc
     dtype = jnp.dtype(jnp.result_type(float))
     if subsample is None:  # the usual case: gather the bins above the horizon once, then look at validity
         keep = _above_index(resolution)
-        vals = np.take(values, keep, axis=-1, out=_aligned_empty(values.shape[:-1] + keep.shape, values.dtype))
+        # mode="clip" (the indices are in range): with the default mode numpy gathers into a buffer, then copies
+        vals = np.take(values, keep, axis=-1, out=_aligned_empty(values.shape[:-1] + keep.shape, values.dtype),
+                       mode="clip")
         if vals.min() >= 0.0:  # every kept bin valid in every lane
             valid = None
         else:
@@ -562,15 +670,19 @@ def load_merl_binary(
         raise InputError(f"names: expected {len(plist)} names, found {len(names)}")
     source = (f"MERL .binary {', '.join(p.name for p in plist)}"
               + (f" (subsample {subsample}, seed {seed})" if subsample else ""))
+    # the grid's bins, directions and weights (the first load of a process) made in a thread while the file is read;
+    # files with bins missing in every lane use other arrays (merl_grid's), and the grid made is kept for later loads
+    dtype_name = _default_float_name()
+    on_header = None if subsample is not None else lambda r: _device_grid.start(r, dtype_name)
     if len(plist) == 1:  # read into the reused buffer, gathered from before the lock is released
         with _SCRATCH_LOCK:
-            raw, res = _read_raw(plist[0], _SCRATCH)
+            raw, res = _read_raw(plist[0], _SCRATCH, on_header)
             return _merl_measurements(raw[None], res, subsample=subsample, seed=seed, names=names,
                                       scale=MERL_SCALE, source=source)
     tables = []
     res = None
     for p in plist:
-        vals, r = _read_raw(p, None)
+        vals, r = _read_raw(p, None, on_header if res is None else None)
         if res is not None and r != res:
             raise HeaderError(p, f"the resolution {res} of {plist[0]}", f"{r}")
         res = r
