@@ -21,9 +21,9 @@ from collections.abc import Callable
 from importlib import metadata
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
+from ._arrays import device_array
 from ._errors import UnknownNameError
 
 ENTRY_POINT_GROUP = "polyjax.models"
@@ -70,7 +70,7 @@ def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, statu
         missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta and k not in defaults]
         if missing:
             raise KeyError(f"missing fields {missing}")
-        return cls(**{k: jnp.asarray(arrs[k]) for k in arrays}, **{k: meta.get(k, defaults.get(k)) for k in static})
+        return cls(**{k: device_array(arrs[k]) for k in arrays}, **{k: meta.get(k, defaults.get(k)) for k in static})
 
     return ModelKind(kind=kind, type=cls, to_arrays=to_arrays, from_arrays=from_arrays, models=tuple(models), fit=fit,
                      status_names=tuple(status_names))

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from ._arrays import device_array
 from ._errors import InputError
 
 
@@ -151,9 +152,9 @@ def make_measurements(
     u = u / np.linalg.norm(u, axis=-1, keepdims=True)
     v = v / np.linalg.norm(v, axis=-1, keepdims=True)
     values = np.where(finite, values, 0.0)
-    cast = (lambda a: jnp.asarray(a, dtype=dtype)) if dtype is not None else jnp.asarray
+    cast = (lambda a: device_array(a, dtype))  # noqa: E731
     return Measurements(
-        u=cast(u), v=cast(v), values=cast(values), weights=cast(weights), mask=jnp.asarray(m),
+        u=cast(u), v=cast(v), values=cast(values), weights=cast(weights), mask=device_array(m),
         names=tuple(names), ids=tuple(int(i) for i in ids), channels=tuple(channels),
         axes=tuple(axes), source=source,
     )

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import device_array
 from .._config import data_file
 from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements
@@ -305,7 +306,7 @@ def load_nbrdf(
         name = resolve_merl_name(path)
         with _NetworkSet(merl_nbrdf_path(root)) as nets:
             w = nets.read(nets.resolve(name))
-        return NeuralBRDF(*(jnp.asarray(a) for a in w), name=name)
+        return NeuralBRDF(*(device_array(a) for a in w), name=name)
     with _NetworkSet(path) as nets:
         single = isinstance(names, str)
         if names is None:
@@ -342,8 +343,8 @@ def _grid_arrays(subsample, seed: int, dtype_name: str):
     x = np.stack([np.sin(th), np.zeros_like(th), np.cos(th),
                   np.sin(td) * np.cos(pd), np.sin(td) * np.sin(pd), np.cos(td)], axis=-1)
     dtype = np.dtype(dtype_name)
-    return (jnp.asarray(x, jnp.float32), jnp.asarray(u[keep], dtype), jnp.asarray(v[keep], dtype),
-            jnp.asarray(w[keep], dtype))
+    return (device_array(x, np.float32), device_array(u[keep], dtype), device_array(v[keep], dtype),
+            device_array(w[keep], dtype))
 
 
 def load_merl_nbrdf(
@@ -410,7 +411,7 @@ def _grid_measurements(path, names, single, subsample, seed, what) -> Measuremen
         raise InputError(f"subsample: expected None, a count or a fraction in (0, 1), found {subsample!r}")
     dtype = jnp.dtype(jnp.result_type(float))
     x, u, v, w = _grid_arrays(subsample, int(seed), dtype.name)
-    vals = _eval_grid(tuple(jnp.asarray(p) for p in params), x).astype(dtype)
+    vals = _eval_grid(tuple(device_array(p) for p in params), x).astype(dtype)
     if single:
         vals = vals[0]
     return Measurements(

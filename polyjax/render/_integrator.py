@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._arrays import cast_concrete
 from .._errors import InputError
 from ._brdf import evaluate_rgb
 from ._envmap import EnvironmentLight, pool_indices
@@ -59,7 +60,7 @@ _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
 
 def cast_floats(tree, dtype):
     """Cast every floating-point array leaf of a pytree (scene, BRDF) to ``dtype``."""
-    return jax.tree.map(lambda x: x.astype(dtype) if eqx.is_inexact_array(x) else x, tree)
+    return jax.tree.map(lambda x: cast_concrete(x, dtype) if eqx.is_inexact_array(x) else x, tree)
 
 
 class RenderResult(eqx.Module):

@@ -20,6 +20,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from .._arrays import device_array
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._model import PolynomialBRDF
 from ._exr import channel_layout, read_exr_shard, write_exr_shard
@@ -177,7 +178,7 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
         for n in _FIELDS:
             pieces[n].append(got[n][max(lo, a) - a: min(hi, b) - a])
     arrays = {n: np.concatenate(p, axis=0) for n, p in pieces.items()}
-    return PolynomialBRDF(**{n: jax.numpy.asarray(a) for n, a in arrays.items()}, variables=meta["variables"],
+    return PolynomialBRDF(**{n: device_array(a) for n, a in arrays.items()}, variables=meta["variables"],
                           basis=meta["basis"], interactions=bool(meta["interactions"]),
                           max_degree=int(meta["max_degree"]), link=meta.get("link", "identity"),
                           eps=float(meta.get("eps", 0.0)))
