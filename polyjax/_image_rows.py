@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ._arrays import device_array
 from ._errors import InputError
 from ._inputs import is_concrete
 
@@ -165,8 +166,14 @@ def _gather(rows, compact):
     if compact and is_concrete(keep):
         idx = np.flatnonzero(np.asarray(keep))
         if idx.size:
-            u, v, c, y, wpx, keep = (a[idx] for a in (u, v, c, y, wpx, keep))
+            u, v, c, y, wpx, keep = _take_rows((u, v, c, y, wpx, keep), device_array(idx))
     return ImageRows(u=u, v=v, weight=c, values=y, pixel_weights=wpx, keep=keep)
+
+
+@jax.jit
+def _take_rows(arrays, idx):
+    """The rows ``idx`` of every array, in one compiled program."""
+    return tuple(a[idx] for a in arrays)
 
 
 @jax.jit

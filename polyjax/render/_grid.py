@@ -14,6 +14,7 @@ several :class:`polyjax.render.Phong` s) are stacked into one pytree and evaluat
 
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import equinox as eqx
@@ -22,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._arrays import device_array
 from .._errors import InputError
 from ._brdf import Lambertian, evaluate_rgb, rgb_brdf
 from ._envmap import sample_pool
@@ -128,21 +130,35 @@ def render_grid(brdfs: Sequence[Sequence], scene: Scene | None = None, *, size: 
         b0 = flat[members[0]]
         if isinstance(b0, eqx.Module):
             params = [eqx.filter(flat[k], eqx.is_array) for k in members]
-            stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *params)
+            stacked = _stacked(params)
             groups.append((stacked, eqx.filter(b0, eqx.is_array, inverse=True)))
         else:
             groups.append((None, b0))
         where.append(members)
     pool = None
     if effects.environment:
-        pool = tuple(jnp.asarray(a, dtype) for a in sample_pool(scene.environment, _pool_size(int(spp)), int(seed)))
+        pool = tuple(device_array(a, dtype) for a in sample_pool(scene.environment, _pool_size(int(spp)), int(seed)))
     seed = jnp.asarray(int(seed) & 0xFFFFFFFF, jnp.uint32)
     outs, hit = _grid_impl(scene, groups, pool, seed, effects, int(spp))
-    h, w = scene.camera.height, scene.camera.width
-    images = jnp.zeros((n_r * n_c, h, w, 3), dtype)
+    images = _assemble(tuple(outs), tuple(tuple(m) for m in where), (n_r, n_c))
+    return GridResult(images, hit, effects)
+
+
+@jax.jit
+def _stacked(params):
+    """The array leaves of the models of one group stacked along a new first axis (one compiled program)."""
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *params)
+
+
+@functools.partial(jax.jit, static_argnames=("where", "grid"))
+def _assemble(outs, where, grid):
+    """The ``grid`` ``(rows, columns)`` of images from the groups' images ``outs`` (group ``g`` holds the cells
+    ``where[g]``, row-major), in one compiled program."""
+    h, w = outs[0].shape[1:3]
+    images = jnp.zeros((grid[0] * grid[1], h, w, 3), outs[0].dtype)
     for members, out in zip(where, outs):
-        images = images.at[jnp.asarray(members)].set(out)
-    return GridResult(images.reshape(n_r, n_c, h, w, 3), hit, effects)
+        images = images.at[jnp.asarray(members)].set(out.astype(images.dtype))
+    return images.reshape(*grid, h, w, 3)
 
 
 __all__ = ["GridResult", "render_grid", "sphere_scene"]
