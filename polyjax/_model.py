@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -85,7 +87,10 @@ class PolynomialBRDF(eqx.Module):
         """Select lanes of the batch (``model[3]``, ``model[:, 0]``)."""
         if not self.batch_shape:
             raise IndexError("this PolynomialBRDF has no batch axes")
-        return jax.tree.map(lambda a: a[index], self)
+        key = _index_key(index)
+        if key is None:  # an array index
+            return jax.tree.map(lambda a: a[index], self)
+        return _select(self, key)  # one compiled program per index (op by op, two per field)
 
     def _lane(self, params, x: Float[Array, "... k"]) -> Float[Array, "..."]:
         coef, mean, rot, centre, hw = params
@@ -181,3 +186,37 @@ def _evaluate(model: PolynomialBRDF, u, v):
     if model.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
         out = jnp.exp(out) - model.eps
     return jnp.where(above, out, 0.0)
+
+
+def _index_key(index):
+    """A hashable form of a basic index (integers, slices, None, Ellipsis and tuples of them), or None."""
+    if isinstance(index, tuple):
+        keys = tuple(_index_key(i) for i in index)
+        return None if any(k is None and i is not None for k, i in zip(keys, index)) else ("tuple", keys)
+    if isinstance(index, slice):
+        parts = (index.start, index.stop, index.step)
+        return ("slice", parts) if all(p is None or isinstance(p, (int, np.integer)) for p in parts) else None
+    if isinstance(index, (int, np.integer)) and not isinstance(index, bool):
+        return ("int", int(index))
+    if index is Ellipsis:
+        return ("ellipsis",)
+    return None
+
+
+def _from_key(key):
+    kind = key[0] if key is not None else None
+    if kind == "tuple":
+        return tuple(_from_key(k) for k in key[1])
+    if kind == "slice":
+        return slice(*key[1])
+    if kind == "int":
+        return key[1]
+    if kind == "ellipsis":
+        return Ellipsis
+    return None
+
+
+@functools.partial(jax.jit, static_argnames=("key",))
+def _select(model: PolynomialBRDF, key) -> PolynomialBRDF:
+    index = _from_key(key)
+    return jax.tree.map(lambda a: a[index], model)
