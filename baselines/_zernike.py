@@ -66,13 +66,29 @@ def _order_of(n_params: int) -> int:
     raise InputError(f"zernike: {n_params} coefficients is not the size of any order's basis")
 
 
-def _radial_q(n: int, m: int, r2):
-    """``Q_n^m(rho^2) = R_n^m(rho) / rho^m`` as a polynomial in ``rho^2``."""
-    out = jnp.zeros_like(r2)
-    for k in range((n - m) // 2 + 1):
-        c = (-1) ** k * factorial(n - k) / (factorial(k) * factorial((n + m) // 2 - k) * factorial((n - m) // 2 - k))
-        out = out + c * r2 ** ((n - m) // 2 - k)
-    return out
+@functools.lru_cache(maxsize=None)
+def _radial_table(order: int):
+    """The radial polynomials of ``order``'s terms as one table: ``pairs`` ``(n, m)`` and ``coef (P + 1, len(pairs))``
+    with ``Q_n^m(rho^2) = R_n^m(rho) / rho^m = sum_p coef[p, j] rho^(2p)``, and for every term ``(m, n, n2)`` the
+    columns of ``(n, m)`` and ``(n2, m)``. Evaluated as one product with the powers of ``rho^2``, not one
+    polynomial at a time (at order 20, 121 polynomials: a program that took seconds to compile)."""
+    terms = zernike_terms(order)
+    pairs = sorted({(n, m) for (m, n, _) in terms} | {(n2, m) for (m, _, n2) in terms})
+    col = {pair: j for j, pair in enumerate(pairs)}
+    coef = np.zeros((max((n - m) // 2 for n, m in pairs) + 1, len(pairs)))
+    for j, (n, m) in enumerate(pairs):
+        for k in range((n - m) // 2 + 1):
+            coef[(n - m) // 2 - k, j] = (-1) ** k * factorial(n - k) / (
+                factorial(k) * factorial((n + m) // 2 - k) * factorial((n - m) // 2 - k))
+    first = np.array([col[(n, m)] for (m, n, _) in terms])
+    second = np.array([col[(n2, m)] for (m, _, n2) in terms])
+    return coef, first, second, np.array([m for (m, _, _) in terms])
+
+
+def _radial(coef, r2):
+    """``(..., len(pairs))``: every ``Q_n^m(r2)`` of :func:`_radial_table`."""
+    powers = jnp.stack([jnp.ones_like(r2)] + [r2 ** p for p in range(1, coef.shape[0])], axis=-1)
+    return powers @ jnp.asarray(coef, r2.dtype)
 
 
 def disk_point(w):
@@ -85,7 +101,6 @@ def disk_point(w):
 
 def zernike_design(u, v, order: int = 8):
     """The ``(..., n_terms)`` basis values ``B_j(u, v)`` (see module docs)."""
-    terms = zernike_terms(order)
     ux, uy, ru = disk_point(u)
     vx, vy, rv = disk_point(v)
     # z = p_u conj(p_v) = rho_u rho_v exp(i (phi_u - phi_v))
@@ -96,12 +111,10 @@ def zernike_design(u, v, order: int = 8):
     for _ in range(order):
         re, im = re * a - im * b, re * b + im * a
         powers.append(re)
-    qu = {(n, m): _radial_q(n, m, ru) for (m, n, _) in terms}
-    qv = {(n, m): _radial_q(n, m, rv) for (m, n, _) in terms}
-    qu.update({(n2, m): _radial_q(n2, m, ru) for (m, _, n2) in terms if (n2, m) not in qu})
-    qv.update({(n2, m): _radial_q(n2, m, rv) for (m, _, n2) in terms if (n2, m) not in qv})
-    cols = [0.5 * (qu[(n, m)] * qv[(n2, m)] + qu[(n2, m)] * qv[(n, m)]) * powers[m] for (m, n, n2) in terms]
-    return jnp.stack(cols, axis=-1)
+    coef, first, second, m = _radial_table(order)
+    qu, qv = _radial(coef, ru), _radial(coef, rv)
+    sym = 0.5 * (qu[..., first] * qv[..., second] + qu[..., second] * qv[..., first])
+    return sym * jnp.stack(powers, axis=-1)[..., m]
 
 
 def zernike(params, u, v):
