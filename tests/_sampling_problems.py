@@ -1,7 +1,9 @@
 """Shared BRDFs and a chi-square test of a sampler against its density, for the sampling and export tests."""
 
 import functools
+from typing import Callable
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,8 +17,12 @@ OBLIQUE = np.array([np.sin(np.deg2rad(45.0)) * np.cos(1.0), np.sin(np.deg2rad(45
 GLOSSY = "gold-metallic-paint"
 
 
-class Baseline:
-    """A baselines model with fixed parameters as a BRDF callable ``f(u, v)``."""
+class Baseline(eqx.Module):
+    """A baselines model with fixed parameters as a BRDF callable ``f(u, v)`` (a pytree: every instance of one model
+    shares the compiled programs it is passed to)."""
+
+    fn: Callable = eqx.field(static=True)
+    params: jax.Array
 
     def __init__(self, name, params):
         import baselines
