@@ -321,6 +321,40 @@ def _raise_nonfinite(bad, values):
     )
 
 
+@jax.jit
+def _bad_weights(w):
+    return ~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)
+
+
+@functools.partial(jax.jit, static_argnames=("n_groups", "nonfinite"))
+def _lane_core(u, v, y, m, *, n_groups, nonfinite):
+    """The array work of :func:`_prepare_lane_directions` in one compiled program: unit directions per group, the
+    mask, the per-lane flags and the values with 0 for NaN/inf (plus what its check needs: the bad samples and
+    whether there is any)."""
+    nb, n = y.shape
+    u, ok_u = safe_normalize(u.reshape(n_groups, n, 3))
+    v, ok_v = safe_normalize(v.reshape(n_groups, n, 3))
+    m = m & (ok_u & ok_v)
+    finite = jnp.isfinite(y)
+    r = nb // n_groups
+    m_lanes = jnp.repeat(m, r, axis=0) if m.shape[0] > 1 and r > 1 else m
+    bad = m_lanes & ~finite  # (B, n)
+    if nonfinite == "mask":
+        finite_group = jnp.all(finite.reshape(n_groups, -1, n), axis=1)
+        m = m & (finite if n_groups == nb else finite_group)
+        lane_bad = jnp.zeros((nb,), bool)
+    else:
+        lane_bad = jnp.any(bad, axis=-1)
+    return u, v, jnp.where(finite, y, 0.0), m, lane_bad, bad, jnp.any(bad)
+
+
+@functools.partial(jax.jit, static_argnames=("n_groups",))
+def _same_nonfinite(y, n_groups):
+    """Whether every lane of each of ``n_groups`` groups of rows of ``y`` has NaN/inf at the same samples."""
+    finite = jnp.isfinite(y).reshape(n_groups, -1, y.shape[-1])
+    return jnp.all(jnp.all(finite, axis=1) == jnp.any(finite, axis=1))
+
+
 def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfinite) -> PreparedInputs:
     """:func:`prepare_inputs` for directions ``(*dbatch, n, 3)``: ``G = prod(dbatch)`` groups of lanes."""
     nb = int(np.prod(batch)) if batch else 1
@@ -332,29 +366,15 @@ def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfi
     y = values.reshape(nb, n)
     w = jnp.ones((1, n), dtype) if weights is None else _lane_array("weights", weights, n, batch, dtype, dbatch)
     m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, dbatch)
-    if is_concrete(w) and _holds(~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)):
+    if is_concrete(w) and _holds(_bad_weights(w)):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    u, v = u.reshape(n_groups, n, 3), v.reshape(n_groups, n, 3)
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
-    m = m & (ok_u & ok_v)
-    finite = jnp.isfinite(y)
-    r = nb // n_groups
-    m_lanes = jnp.repeat(m, r, axis=0) if m.shape[0] > 1 and r > 1 else m
-    bad = m_lanes & ~finite  # (B, n)
-    if nonfinite == "error" and is_concrete(y, m) and _holds(jnp.any(bad)):
+    u, v, y_clean, m, lane_bad, bad, any_bad = _lane_core(u, v, y, m, n_groups=n_groups, nonfinite=nonfinite)
+    if nonfinite == "error" and is_concrete(y, m) and _holds(any_bad):
         _raise_nonfinite(bad, values)
-    if nonfinite == "mask":
-        finite_group = jnp.all(finite.reshape(n_groups, -1, n), axis=1)
-        if n_groups != nb and is_concrete(y) and not _holds(jnp.all(
-                finite_group == jnp.any(finite.reshape(n_groups, -1, n), axis=1)), default=True):
-            raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
-                             f"{tuple(dbatch) + (n, 3)}) needs NaN/inf at the same samples in every lane of a group")
-        m = m & (finite if n_groups == nb else finite_group)
-        lane_bad = jnp.zeros((nb,), bool)
-    else:
-        lane_bad = jnp.any(bad, axis=-1)
-    y = jnp.where(finite, y, 0.0)
+    if nonfinite == "mask" and n_groups != nb and is_concrete(y) and not _holds(_same_nonfinite(y, n_groups)):
+        raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
+                         f"{tuple(dbatch) + (n, 3)}) needs NaN/inf at the same samples in every lane of a group")
+    y = y_clean
     return PreparedInputs(u, v, y, w, m, lane_bad, batch, False, True)
 
 

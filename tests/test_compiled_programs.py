@@ -122,3 +122,30 @@ def test_zernike_design_matches_its_definition(order, tol):
                      for (m, n, n2) in baselines.zernike_terms(order)], axis=-1)
     assert got.shape == want.shape == (40, baselines.n_zernike_terms(order))
     np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+
+
+def test_per_lane_directions_checks_after_their_compiled_preparation():
+    """Directions ``(G, n, 3)`` shared by the lanes of each group: NaN values are refused (naming them), masked when
+    asked for if every lane of a group has them at the same samples (else refused), and bad weights refused."""
+    (u0, v0), (u1, v1) = random_hemisphere(60, seed=6), random_hemisphere(60, seed=7)
+    u, v = np.stack([u0, u1]), np.stack([v0, v1])  # 2 groups
+    y = np.random.default_rng(2).random((2, 3, 60))  # 3 lanes per group
+    with pytest.raises(pj.InputError, match="values"):
+        pj.fit_polynomial(u, v, np.where(np.arange(60) == 5, np.nan, y), degree=2)
+    bad = y.copy()
+    bad[0, 1, 7] = np.nan  # one lane of group 0 only
+    with pytest.raises(pj.InputError, match="same samples"):
+        pj.fit_polynomial(u, v, bad, degree=2, nonfinite="mask")
+    with pytest.raises(pj.InputError, match="weights"):
+        pj.fit_polynomial(u, v, y, degree=2, weights=-np.ones((2, 60)))
+    same = y.copy()
+    same[0, :, 7] = np.nan  # every lane of group 0 at sample 7
+    masked = pj.fit_polynomial(u, v, same, degree=2, nonfinite="mask")
+    keep = np.ones((2, 60), bool)
+    keep[0, 7] = False
+    want = pj.fit_polynomial(u, v, np.where(np.isnan(same), 0.0, same), degree=2, mask=keep)
+    np.testing.assert_allclose(masked.coefficients, want.coefficients, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(masked.n_used, want.n_used)
+    full = pj.fit_polynomial(u, v, y, degree=2)
+    assert np.all(np.asarray(full.n_used)[0] - np.asarray(masked.n_used)[0] <= 1)
+    np.testing.assert_array_equal(np.asarray(full.n_used)[1], np.asarray(masked.n_used)[1])
