@@ -31,7 +31,12 @@ class Baseline(eqx.Module):
         self.params = jnp.asarray(params, dtype=float)
 
     def __call__(self, u, v):
-        return self.fn(self.params, u, v)
+        return _evaluate(self, u, v)
+
+
+@eqx.filter_jit
+def _evaluate(brdf: Baseline, u, v):  # one compiled program per model and shapes (op by op: one per operation)
+    return brdf.fn(brdf.params, u, v)
 
 
 def cook_torrance():

@@ -132,9 +132,11 @@ def test_gradients_finite_at_published_extremes(name):
     else:
         ps = jnp.asarray([[0.0, 5700.0, 8e6, 2.67, 99.9], [0.4, 0.08, 11.2, 0.0235, 1.04]])
     fn = bl.get_model(name).evaluate
+    value = jax.jit(fn)  # compiled: op by op, every operation of the model and its derivative compiles on its own
+    grad = jax.jit(jax.grad(lambda q: jnp.sum(fn(q, jnp.asarray(u), jnp.asarray(v)))))
     for p in ps:
-        f = fn(p, jnp.asarray(u), jnp.asarray(v))
-        g = jax.grad(lambda q: jnp.sum(fn(q, jnp.asarray(u), jnp.asarray(v))))(p)
+        f = value(p, jnp.asarray(u), jnp.asarray(v))
+        g = grad(p)
         assert np.all(np.isfinite(np.asarray(f))) and np.all(np.isfinite(np.asarray(g)))
 
 
