@@ -21,9 +21,9 @@ def device_array(a, dtype=None) -> jax.Array:
     if isinstance(a, (jax.Array, int, float, complex, bool)) or a is None:
         return jnp.asarray(a, dtype)
     host = np.asarray(a)
-    want = jax.dtypes.canonicalize_dtype(host.dtype if dtype is None else dtype)
     if host.dtype == np.dtype(object):
         return jnp.asarray(a, dtype)
+    want = jax.dtypes.canonicalize_dtype(host.dtype if dtype is None else dtype)
     return jax.device_put(host.astype(want, copy=False))
 
 

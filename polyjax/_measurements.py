@@ -152,9 +152,9 @@ def make_measurements(
     u = u / np.linalg.norm(u, axis=-1, keepdims=True)
     v = v / np.linalg.norm(v, axis=-1, keepdims=True)
     values = np.where(finite, values, 0.0)
-    cast = (lambda a: device_array(a, dtype))  # noqa: E731
     return Measurements(
-        u=cast(u), v=cast(v), values=cast(values), weights=cast(weights), mask=device_array(m),
+        u=device_array(u, dtype), v=device_array(v, dtype), values=device_array(values, dtype),
+        weights=device_array(weights, dtype), mask=device_array(m),
         names=tuple(names), ids=tuple(int(i) for i in ids), channels=tuple(channels),
         axes=tuple(axes), source=source,
     )

@@ -189,31 +189,28 @@ def _evaluate(model: PolynomialBRDF, u, v):
 
 
 def _index_key(index):
-    """A hashable form of a basic index (integers, slices, None, Ellipsis and tuples of them), or None."""
+    """A hashable form of a basic index (integers, slices, None, Ellipsis and tuples of them; slices are not
+    hashable before Python 3.12), or None for any other index."""
     if isinstance(index, tuple):
         keys = tuple(_index_key(i) for i in index)
-        return None if any(k is None and i is not None for k, i in zip(keys, index)) else ("tuple", keys)
+        return None if None in keys else ("tuple", keys)
     if isinstance(index, slice):
         parts = (index.start, index.stop, index.step)
-        return ("slice", parts) if all(p is None or isinstance(p, (int, np.integer)) for p in parts) else None
+        ok = all(p is None or (isinstance(p, (int, np.integer)) and not isinstance(p, bool)) for p in parts)
+        return ("slice", tuple(None if p is None else int(p) for p in parts)) if ok else None
     if isinstance(index, (int, np.integer)) and not isinstance(index, bool):
         return ("int", int(index))
-    if index is Ellipsis:
-        return ("ellipsis",)
+    if index is None or index is Ellipsis:
+        return ("atom", index)
     return None
 
 
 def _from_key(key):
-    kind = key[0] if key is not None else None
+    """The index :func:`_index_key` made ``key`` from."""
+    kind, value = key
     if kind == "tuple":
-        return tuple(_from_key(k) for k in key[1])
-    if kind == "slice":
-        return slice(*key[1])
-    if kind == "int":
-        return key[1]
-    if kind == "ellipsis":
-        return Ellipsis
-    return None
+        return tuple(_from_key(k) for k in value)
+    return slice(*value) if kind == "slice" else value
 
 
 @functools.partial(jax.jit, static_argnames=("key",))

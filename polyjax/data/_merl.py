@@ -597,7 +597,7 @@ def _merl_measurements(values, resolution, *, subsample, seed, names, source, sc
     import jax.numpy as jnp
 
     resolution = tuple(resolution)
-    dtype = jnp.dtype(jnp.result_type(float))
+    dtype = jnp.dtype(_default_float_name())
     if subsample is None:  # the usual case: gather the bins above the horizon once, then look at validity
         keep = _above_index(resolution)
         # mode="clip" (the indices are in range): with the default mode numpy gathers into a buffer, then copies
