@@ -65,6 +65,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"cache folder {str(folder)!r}: cannot be created ({e.strerror or e})") from None
+    jax.config.update("jax_enable_compilation_cache", True)  # in case a process turned JAX's cache off before
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
