@@ -27,6 +27,12 @@ def test_tabulate_fitted_model_on_given_directions(model):
     assert np.all(np.asarray(refit.l2) < 0.05 * np.asarray(zero))
 
 
+def _pair_keys(u, v):
+    """One byte string per direction pair: (u, v) rounded to 1e-10 (signed zeros made positive)."""
+    r = np.ascontiguousarray(np.round(np.concatenate([u, v], axis=1), 10) + 0.0)
+    return r.view(np.dtype((np.void, r.itemsize * r.shape[1]))).ravel()
+
+
 def test_tabulate_rgb_last_callable_on_the_merl_grid():
     def brdf(u, v):  # (..., 3) like NeuralBRDF and the renderer's BRDFs
         c = jnp.clip(u[..., 2] * v[..., 2], 0, None)
@@ -35,12 +41,14 @@ def test_tabulate_rgb_last_callable_on_the_merl_grid():
     d = pj.data.tabulate(brdf, grid="merl", subsample=2000, seed=5)
     assert d.values.shape == (3, 2000) and d.channels == ("R", "G", "B") and d.axes == ("channel",)
     u, v, w, above = pj.data.merl_grid()
-    table = {tuple(np.round(np.concatenate([a, b]), 10)): c for a, b, c in zip(u[above], v[above], w[above])}
     uu = np.asarray(d.u)
-    # every tabulated pair is a MERL bin centre above the horizon, weighted by the bin's solid angle
-    got = [table.get(tuple(np.round(np.concatenate([a, b]), 10))) for a, b in zip(uu, np.asarray(d.v))]
-    assert all(g is not None for g in got)
-    np.testing.assert_allclose(np.asarray(d.weights), np.asarray(got, float), rtol=1e-12)
+    # every tabulated pair is a MERL bin centre above the horizon, weighted by the bin's solid angle: each pair is
+    # looked up among the bin centres (u, v rounded to 1e-10) by a binary search of their byte keys
+    centres = _pair_keys(u[above], v[above])
+    order = np.argsort(centres)
+    at = np.minimum(np.searchsorted(centres[order], _pair_keys(uu, np.asarray(d.v))), order.size - 1)
+    assert np.array_equal(centres[order][at], _pair_keys(uu, np.asarray(d.v)))
+    np.testing.assert_allclose(np.asarray(d.weights), w[above][order[at]], rtol=1e-12)
     np.testing.assert_allclose(np.asarray(d.values), np.asarray(brdf(d.u, d.v)).T, rtol=1e-15)
     same = pj.data.tabulate(brdf, grid="merl", subsample=2000, seed=5)
     np.testing.assert_array_equal(np.asarray(same.u), uu)
