@@ -7,48 +7,36 @@ least squares. Enable float64 in your entry point (``jax.config.update("jax_enab
 for fitting; polyjax does not change global JAX settings on import.
 """
 
-import gc as _gc
-
-# Importing makes about 10^5 long-lived objects (JAX's and polyjax's), and Python's cyclic garbage collector would scan
-# them again and again while they are made: about a tenth of the import's time. It is paused for the import and left
-# as it was found.
-_gc_was_enabled = _gc.isenabled()
-_gc.disable()
-try:
-    from . import data
-    from ._approx import ApproximationError, approximation_error
-    from ._basis import design_matrix, exponents, n_terms
-    from ._cache import CACHE_ENV, default_cache_dir, enable_compilation_cache
-    from ._config import DATA_ENV, data_root, has_data_root
-    from ._design import fitted_design
-    from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
-    from ._fit import fit_polynomial, n_parameters
-    from ._fit_images import fit_polynomial_to_images
-    from ._geometry import (
-        cartesian_to_spherical,
-        cos_theta,
-        cutoff_mask,
-        half_vector,
-        reflect,
-        safe_normalize,
-        spherical_to_cartesian,
-    )
-    from ._image_rows import ImageRows, image_rows
-    from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
-    from ._io import load_model, save_model
-    from ._kinds import ModelKind, model_kinds, register_model_kind
-    from ._logfit import fit_log_polynomial
-    from ._lstsq import LstsqSolution, weighted_lstsq
-    from ._measurements import Measurements, check_samples, make_measurements
-    from ._metrics import fit_weights, l2_error, psnr
-    from ._model import FitStatus, PolynomialBRDF, evaluate_paper_form
-    from ._pca import PCA, fit_pca
-    from ._results import RESULTS, Result, raise_on_status
-    from ._variables import VariableSet, explanatory_variables, get_variables, register_variables, variable_sets
-finally:
-    if _gc_was_enabled:
-        _gc.enable()
-    del _gc_was_enabled
+from . import data
+from ._approx import ApproximationError, approximation_error
+from ._basis import design_matrix, exponents, n_terms
+from ._cache import CACHE_ENV, default_cache_dir, enable_compilation_cache
+from ._config import DATA_ENV, data_root, has_data_root
+from ._design import fitted_design
+from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError
+from ._fit import fit_polynomial, n_parameters
+from ._fit_images import fit_polynomial_to_images
+from ._geometry import (
+    cartesian_to_spherical,
+    cos_theta,
+    cutoff_mask,
+    half_vector,
+    reflect,
+    safe_normalize,
+    spherical_to_cartesian,
+)
+from ._image_rows import ImageRows, image_rows
+from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
+from ._io import load_model, save_model
+from ._kinds import ModelKind, model_kinds, register_model_kind
+from ._logfit import fit_log_polynomial
+from ._lstsq import LstsqSolution, weighted_lstsq
+from ._measurements import Measurements, check_samples, make_measurements
+from ._metrics import fit_weights, l2_error, psnr
+from ._model import FitStatus, PolynomialBRDF, evaluate_paper_form
+from ._pca import PCA, fit_pca
+from ._results import RESULTS, Result, raise_on_status
+from ._variables import VariableSet, explanatory_variables, get_variables, register_variables, variable_sets
 
 __version__ = "0.1.0"
 
@@ -59,13 +47,7 @@ def __getattr__(name):
     if name in _LAZY_SUBMODULES:
         import importlib
 
-        enabled = _gc.isenabled()
-        _gc.disable()  # as for the import of polyjax itself
-        try:
-            module = importlib.import_module(f".{name}", __name__)
-        finally:
-            if enabled:
-                _gc.enable()
+        module = importlib.import_module(f".{name}", __name__)
         globals()[name] = module
         return module
     raise AttributeError(f"module 'polyjax' has no attribute {name!r}")

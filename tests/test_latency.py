@@ -53,15 +53,13 @@ def test_cli_cache_is_hit_by_a_second_process(tmp_path):
     np.testing.assert_allclose(warm["condition"], plain["condition"], rtol=1e-9)
 
 
-def test_import_leaves_jax_config_and_the_garbage_collector_alone():
-    # the garbage collector is paused while polyjax and its lazy submodules are imported, then left as it was found
-    code = ("import gc, jax, polyjax; on = gc.isenabled(); gc.disable(); polyjax.render; "
-            "print(jax.config.jax_compilation_cache_dir, on, gc.isenabled())")
+def test_import_leaves_jax_config_alone():
+    code = "import jax, polyjax; print(jax.config.jax_compilation_cache_dir)"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                          env={**{k: v for k, v in os.environ.items() if not k.startswith("JAX_")},
                               "PYTHONPATH": str(ROOT)})  # without the test run's JAX_COMPILATION_CACHE_DIR
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["None", "True", "False"]
+    assert out.stdout.strip() == "None"
 
 
 def test_cache_folder_settings(tmp_path, monkeypatch):
