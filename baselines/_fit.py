@@ -164,16 +164,21 @@ def _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> 
 def _result(model, backend: str, inp, out: dict, throw: bool) -> BaselineFit:
     """The :class:`BaselineFit` of the kernel's ``out`` in the batch shape of the inputs, with its result codes
     (raised with ``throw``)."""
-    # one result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
-    # NONFINITE, as in the polynomial fit
-    status = out["status"]
-    status = jnp.where(inp.lane_bad, Result.NONFINITE, status)
-    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status).astype(jnp.int32)
-    out.update(status=status, success=out["success"] & (status == Result.OK),
-               l2=jnp.where(inp.lane_bad, jnp.inf, out["l2"]))
-    fitted = BaselineFit(**{k: a.reshape(inp.batch + a.shape[1:]) for k, a in out.items()}, name=model.name,
-                         backend=backend)
+    fitted = BaselineFit(**_shaped(out, inp.lane_bad, batch=tuple(inp.batch)), name=model.name, backend=backend)
     return raise_on_status("fit", fitted.status, fitted) if throw else fitted
+
+
+@functools.partial(jax.jit, static_argnames=("batch",))
+def _shaped(out: dict, lane_bad, *, batch: tuple) -> dict:
+    """The kernel's ``(B, ...)`` fields with their result codes, in the batch shape ``batch`` (one compiled call).
+
+    One result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
+    NONFINITE, as in the polynomial fit; a NONFINITE lane's L2 is inf."""
+    status = jnp.where(lane_bad, Result.NONFINITE, out["status"])
+    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status).astype(jnp.int32)
+    out = dict(out, status=status, success=out["success"] & (status == Result.OK),
+               l2=jnp.where(lane_bad, jnp.inf, out["l2"]))
+    return {k: a.reshape(batch + a.shape[1:]) for k, a in out.items()}
 
 
 @functools.partial(jax.jit, static_argnames=("name",))
