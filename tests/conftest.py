@@ -103,9 +103,12 @@ def _cache_off() -> None:
     (serialising and hashing the program, up to a quarter of a large program's compile call) for no cache."""
     jax.config.update("jax_compilation_cache_dir", None)
     jax.config.update("jax_enable_compilation_cache", False)
-    from jax._src import compilation_cache
+    try:  # forget a cache checked or opened before (tests of the cache); private API, the settings above suffice
+        from jax._src import compilation_cache
 
-    compilation_cache.reset_cache()  # forget a cache checked or opened before (tests of the cache)
+        compilation_cache.reset_cache()
+    except (ImportError, AttributeError):  # pragma: no cover
+        pass
 
 
 @pytest.fixture(autouse=True)
@@ -128,9 +131,11 @@ def pytest_runtest_teardown(item, nextitem):
     """Collect the test's cyclic garbage, then freeze every surviving object (:func:`gc.freeze`).
 
     The suite keeps millions of long-lived Python objects (JAX's traces, jaxprs and compiled programs, cached for
-    later tests), and Python's full collections scan them all again and again: about 8% of a worker's time, plus
-    ~9 s at the end of each worker (pytest collects five times at exit). Frozen objects are never scanned; each
-    test's own garbage is still collected here, so memory holds what the process keeps anyway."""
+    later tests), and Python's full collections scan them all again and again: measured 6-10% of a worker's time,
+    plus ~9 s at the end of each worker (pytest collects five times at exit); with the freeze, about 1%. Frozen
+    objects are never scanned; each test's own garbage is still collected here. What was frozen and later becomes
+    unreachable in a reference cycle is not freed: a worker's peak memory was 6.3-7.0 GB in full runs, 6.1 GB
+    without the freeze."""
     gc.collect()
     gc.freeze()
 
