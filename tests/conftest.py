@@ -134,7 +134,7 @@ def pytest_runtest_teardown(item, nextitem):
     later tests), and Python's full collections scan them all again and again: measured 6-10% of a worker's time,
     plus ~9 s at the end of each worker (pytest collects five times at exit); with the freeze, about 1%. Frozen
     objects are never scanned; each test's own garbage is still collected here. What was frozen and later becomes
-    unreachable in a reference cycle is not freed: a worker's peak memory was 6.1-7.0 GB in five full runs, 6.1 GB
+    unreachable in a reference cycle is not freed: a worker's peak memory was 6.1-7.0 GB in six full runs, 6.1 GB
     in two without the freeze."""
     gc.collect()
     gc.freeze()
