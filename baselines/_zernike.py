@@ -68,10 +68,12 @@ def _order_of(n_params: int) -> int:
 
 @functools.lru_cache(maxsize=None)
 def _radial_table(order: int):
-    """The radial polynomials of ``order``'s terms as one table: ``pairs`` ``(n, m)`` and ``coef (P + 1, len(pairs))``
-    with ``Q_n^m(rho^2) = R_n^m(rho) / rho^m = sum_p coef[p, j] rho^(2p)``, and for every term ``(m, n, n2)`` the
-    columns of ``(n, m)`` and ``(n2, m)``. Evaluated as one product with the powers of ``rho^2``, not one
-    polynomial at a time (at order 20, 121 polynomials: a program that took seconds to compile)."""
+    """The radial polynomials of ``order``'s terms as one table: ``(coef, first, second, m)``, with
+    ``coef (P + 1, J)`` over the ``J`` distinct pairs ``(n, m)`` the terms use,
+    ``Q_n^m(rho^2) = R_n^m(rho) / rho^m = sum_p coef[p, j] rho^(2p)``, and for every term ``(m, n, n2)`` the
+    columns ``first`` of ``(n, m)`` and ``second`` of ``(n2, m)``, and its ``m``. Evaluated as one product with the
+    powers of ``rho^2``, not one polynomial at a time (at order 20, 121 polynomials: a program that took seconds
+    to compile)."""
     terms = zernike_terms(order)
     pairs = sorted({(n, m) for (m, n, _) in terms} | {(n2, m) for (m, _, n2) in terms})
     col = {pair: j for j, pair in enumerate(pairs)}
@@ -86,7 +88,7 @@ def _radial_table(order: int):
 
 
 def _radial(coef, r2):
-    """``(..., len(pairs))``: every ``Q_n^m(r2)`` of :func:`_radial_table`."""
+    """``(..., J)``: every ``Q_n^m(r2)`` of :func:`_radial_table`'s ``coef``."""
     powers = jnp.stack([jnp.ones_like(r2)] + [r2 ** p for p in range(1, coef.shape[0])], axis=-1)
     return powers @ jnp.asarray(coef, r2.dtype)
 

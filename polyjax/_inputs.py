@@ -368,14 +368,13 @@ def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfi
     m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, dbatch)
     if is_concrete(w) and _holds(_bad_weights(w)):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    u, v, y_clean, m, lane_bad, bad, any_bad = _lane_core(u, v, y, m, n_groups=n_groups, nonfinite=nonfinite)
+    u, v, y_zeroed, m, lane_bad, bad, any_bad = _lane_core(u, v, y, m, n_groups=n_groups, nonfinite=nonfinite)
     if nonfinite == "error" and is_concrete(y, m) and _holds(any_bad):
         _raise_nonfinite(bad, values)
     if nonfinite == "mask" and n_groups != nb and is_concrete(y) and not _holds(_same_nonfinite(y, n_groups)):
         raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
                          f"{tuple(dbatch) + (n, 3)}) needs NaN/inf at the same samples in every lane of a group")
-    y = y_clean
-    return PreparedInputs(u, v, y, w, m, lane_bad, batch, False, True)
+    return PreparedInputs(u, v, y_zeroed, w, m, lane_bad, batch, False, True)
 
 
 #: a design of more than this many bytes is refused up front (it would not fit in memory on common machines)
