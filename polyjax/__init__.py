@@ -10,6 +10,7 @@ for fitting; polyjax does not change global JAX settings on import.
 from . import data
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
+from ._capture import Capture, relight
 from ._cache import CACHE_ENV, default_cache_dir, enable_compilation_cache
 from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
@@ -69,4 +70,5 @@ __all__ = [
     "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
     "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
+    "Capture", "relight",
 ]

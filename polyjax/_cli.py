@@ -344,6 +344,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         from .render._fit_cli import add_fit_images_parser
 
         add_fit_images_parser(sub, parents=[common])
+        from .render._photo_cli import add_photo_parsers
+
+        add_photo_parsers(sub, parents=[common])
 
     from .export._cli import add_export_parser, run_export
 

@@ -27,6 +27,7 @@ from ._basis import BASES
 from ._design import fitted_design as _design_for
 from ._errors import InputError
 from ._image_rows import image_rows
+from ._image_samples import WEIGHTINGS, fit_samples
 from ._lstsq import METHODS, weighted_lstsq
 from ._model import FitStatus, PolynomialBRDF
 from ._variables import get_variables
@@ -52,9 +53,15 @@ def fit_polynomial_to_images(
     interactions: bool = False,
     method: str = "qr",
     rcond: float | None = None,
+    link: str = "identity",
+    eps: float = 1e-3,
+    steps: int = 3,
+    weighting: str = "radiance",
+    robust_steps: int = 0,
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
-    because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve``.
+    because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve`` (or
+    :func:`polyjax._image_samples.fit_samples` for the BRDF-sample fits).
 
     Minimises, per colour channel, ``sum_pixels w_px (I_px - L_px(beta))^2`` over the kept pixels of
     every image, where ``L_px(beta)`` is the render of the polynomial (linear in ``beta``, see the
@@ -97,6 +104,13 @@ def fit_polynomial_to_images(
         spp: environment samples per pixel of the design (scenes with an environment map).
         seed: random seed of the environment samples.
         basis, interactions, method, rcond: as in :func:`polyjax.fit_polynomial`.
+        link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` (:func:`polyjax.fit_log_polynomial`, on the
+            pixels' BRDF samples; one light sample per pixel).
+        weighting: ``"radiance"`` (the squared pixel residuals, above) or ``"brdf"`` (``sum w (I / c - f)^2``:
+            the residuals of the pixels' BRDF samples ``I / c``, one light sample per pixel;
+            :mod:`polyjax._image_samples`).
+        robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
+            their MAD: :mod:`polyjax._image_samples`); 0: none. One light sample per pixel.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any
@@ -109,8 +123,20 @@ def fit_polynomial_to_images(
             or a scene with inter-reflections.
     """
     vs = _check_options(variables, degree, basis, method)
+    if int(robust_steps) != robust_steps or int(robust_steps) < 0:
+        raise InputError(f"robust_steps: expected a non-negative integer, found {robust_steps!r}")
+    if link not in ("identity", "log"):
+        raise InputError(f"link: expected 'identity' or 'log', found {link!r}")
+    if weighting not in WEIGHTINGS:
+        raise InputError(f"weighting: expected one of {WEIGHTINGS}, found {weighting!r}")
     rows = image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
                       cutoff_deg=cutoff_deg, spp=spp, seed=seed)
+    if link != "identity" or weighting != "radiance" or robust_steps:
+        options = dict(basis=basis, interactions=bool(interactions), method=method, rcond=rcond)
+        if link == "log":
+            options.update(link="log", eps=eps, steps=steps)
+        return fit_samples(rows, vs.name, int(degree), weighting=weighting, robust_steps=int(robust_steps),
+                           options=options)
     u, v, c, y, wpx, keep = rows.u, rows.v, rows.weight, rows.values, rows.pixel_weights, rows.keep
     # one design for the three channels when every light is grey (the same weights in R, G and B)
     shared = False

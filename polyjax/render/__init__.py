@@ -26,7 +26,7 @@ from ._integrator import RenderResult, cast_floats, render
 from ._linear import LightSamples, light_samples, render_linear
 from ._mitsuba import RoughPlastic, mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba
 from ._sampling import ImportanceSampler, importance_sampler
-from ._scene import Camera, DirectionalLight, Effects, Plane, PointLight, Scene, Sphere, plan_effects
+from ._scene import Camera, DirectionalLight, Effects, NormalMap, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
     "BRDF", "Camera", "ChannelsFirst", "DirectionalLight", "Effects", "EnvironmentLight", "GridResult", "Lambertian",
@@ -35,5 +35,5 @@ __all__ = [
     "light_samples", "load_envmap", "mitsuba_bsdf_eval", "mitsuba_roughplastic", "mitsuba_scene_dict", "mosaic",
     "plan_effects", "pool_indices", "procedural_sky", "read_exr", "render", "render_grid", "render_linear",
     "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
-    "ImportanceSampler", "importance_sampler",
+    "ImportanceSampler", "importance_sampler", "NormalMap",
 ]

@@ -53,7 +53,7 @@ from .._arrays import cast_concrete
 from .._errors import InputError
 from ._brdf import evaluate_rgb
 from ._envmap import EnvironmentLight, pool_indices
-from ._scene import DirectionalLight, Effects, Scene, Sphere, plan_effects
+from ._scene import DirectionalLight, Effects, NormalMap, Scene, Sphere, plan_effects
 
 _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
 
@@ -105,6 +105,8 @@ def _intersect(objects, o, d, tmin):
             t0, t1 = -b - sq, -b + sq
             t = jnp.where(t0 > tmin, t0, jnp.where(t1 > tmin, t1, jnp.inf))
             ts.append(jnp.where(disc >= 0, t, jnp.inf))
+        elif isinstance(obj, NormalMap):  # no depth: only primary rays see it (_primary_rays)
+            ts.append(jnp.full(o.shape[:-1], jnp.inf, o.dtype))
         else:
             denom = _dot(d, obj.normal)
             safe = jnp.where(denom != 0, denom, 1.0)
@@ -138,6 +140,14 @@ def _frame(objects, p, idx):
             fallback = jnp.zeros_like(n).at[..., 0].set(1.0)
             ok = tl > 1e-6
             tx = jnp.where(ok, tx / jnp.where(ok, tl, 1.0), fallback)
+            ns.append(n)
+            tans.append(tx)
+        elif isinstance(obj, NormalMap):  # per pixel: ``p`` holds the camera's pixels, row-major
+            n = obj.normals.reshape(-1, 3).astype(p.dtype)
+            tx = jnp.stack([n[..., 2], jnp.zeros_like(n[..., 0]), -n[..., 0]], -1)
+            tl = jnp.sqrt(jnp.sum(tx * tx, -1, keepdims=True))
+            ok = tl > 1e-6
+            tx = jnp.where(ok, tx / jnp.where(ok, tl, 1.0), jnp.zeros_like(n).at[..., 0].set(1.0))
             ns.append(n)
             tans.append(tx)
         else:
@@ -353,7 +363,11 @@ def _primary_rays(scene: Scene):
     o, d = cam.rays()
     o, d = o.astype(scene.background.dtype), d.astype(scene.background.dtype)
     objects = scene.objects
-    t, idx, hit = _intersect(objects, o, d, 0.0)
+    if isinstance(objects[0], NormalMap):  # the lone normal map: seen where its mask is, on the focal plane
+        t = _dot(cam.target.astype(o.dtype) - o, d)
+        idx, hit = jnp.zeros(t.shape, jnp.int32), objects[0].mask.reshape(-1)
+    else:
+        t, idx, hit = _intersect(objects, o, d, 0.0)
     p = o + jnp.where(hit, t, 0.0)[..., None] * d
     frame = _frame(objects, p, idx)
     vl = _to_local(frame, -d)

@@ -1,4 +1,4 @@
-"""Scene description: a camera, analytic spheres and planes, and lights.
+"""Scene description: a camera, analytic spheres and planes, normal maps, and lights.
 
 World frame: right-handed, ``+y`` up. Each object carries its BRDF (a callable
 ``f(u, v) -> (..., 3)``, see :mod:`polyjax.render._brdf`) and defines the local shading frame
@@ -160,6 +160,51 @@ class Plane(eqx.Module):
         self.brdf = rgb_brdf(brdf)
 
 
+class NormalMap(eqx.Module):
+    """A surface known only through its normals as seen by the camera, one per pixel: a measured normal map
+    (photometric stereo, a capture's ground truth). Pixel ``(i, j)`` of the camera sees the surface where
+    ``mask[i, j]``, with unit normal ``normals[i, j]`` (world frame); the point seen lies on the camera's focal
+    plane (the plane through ``target`` facing the camera), so the map has no depth: it casts no shadow, is hit by
+    no secondary ray and reflects no light onto itself. It is a scene's only object, seen by an orthographic
+    camera of its own size (``Scene`` checks both). Tangent ``t``: as :class:`Sphere`'s, ``(0, 1, 0) x n``
+    normalised (``+x`` where ``n`` is along ``+-y``), so a normal map of a sphere has the sphere's frames.
+
+    Attributes:
+        normals: ``(H, W, 3)`` unit normals in the world frame (rows from the top of the image).
+        mask: ``(H, W)`` True where the pixel sees the surface.
+        brdf: the BRDF (:func:`polyjax.render.rgb_brdf` of a model, or a placeholder for fits).
+    """
+
+    normals: Float[Array, "h w 3"]
+    mask: Array
+    brdf: BRDF
+
+    def __init__(self, brdf, normals: ArrayLike, mask: ArrayLike | None = None):
+        n = normals if _traced(normals) else np.asarray(normals, dtype=float)
+        if n.ndim != 3 or n.shape[-1] != 3:
+            raise InputError(f"normals: expected an (H, W, 3) normal map, found shape {tuple(n.shape)}")
+        m = np.ones(n.shape[:2], bool) if mask is None else np.asarray(mask)
+        if m.shape != n.shape[:2]:
+            raise InputError(f"mask: expected shape {tuple(n.shape[:2])} (the normal map's), found {m.shape}")
+        m = m.astype(bool)
+        if not _traced(n):
+            length = np.linalg.norm(n, axis=-1)
+            bad = m & ~(np.abs(length - 1.0) <= 1e-3)
+            if np.any(bad):
+                i, j = np.argwhere(bad)[0]
+                raise InputError(f"normals: expected unit normals where the mask is set; {int(bad.sum())} are not "
+                                 f"(pixel ({i}, {j}) has length {length[i, j]:.6g})")
+            n = np.where(m[..., None], n, np.array([0.0, 0.0, 1.0]))
+        self.normals = n if _traced(n) else jnp.asarray(n)
+        self.mask = jnp.asarray(m)
+        self.brdf = rgb_brdf(brdf)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)``."""
+        return tuple(self.normals.shape[:2])
+
+
 class DirectionalLight(eqx.Module):
     """A distant light: irradiance ``irradiance`` (RGB, on a surface facing it) from ``direction`` (towards the
     light)."""
@@ -196,7 +241,7 @@ class Scene(eqx.Module):
 
     Attributes:
         camera: the :class:`Camera`.
-        objects: tuple of :class:`Sphere` / :class:`Plane`.
+        objects: tuple of :class:`Sphere` / :class:`Plane`, or one :class:`NormalMap` alone.
         lights: tuple of :class:`DirectionalLight`, :class:`PointLight` and at most one
             :class:`polyjax.render.EnvironmentLight`.
         background: RGB radiance of rays that hit nothing (used when there is no environment map).
@@ -217,8 +262,9 @@ class Scene(eqx.Module):
         if not isinstance(camera, Camera):
             raise InputError(f"camera: expected a polyjax.render.Camera, found {type(camera).__name__}")
         for i, o in enumerate(objects):
-            if not isinstance(o, (Sphere, Plane)):
-                raise InputError(f"objects[{i}]: expected a Sphere or Plane, found {type(o).__name__}")
+            if not isinstance(o, (Sphere, Plane, NormalMap)):
+                raise InputError(f"objects[{i}]: expected a Sphere, Plane or NormalMap, found {type(o).__name__}")
+        _check_normal_map(camera, objects)
         n_env = 0
         for i, li in enumerate(lights):
             if not isinstance(li, (DirectionalLight, PointLight, EnvironmentLight)):
@@ -249,6 +295,22 @@ class Scene(eqx.Module):
     def point_lights(self) -> tuple:
         """Directional and point lights."""
         return tuple(li for li in self.lights if isinstance(li, (DirectionalLight, PointLight)))
+
+
+def _check_normal_map(camera: Camera, objects: tuple) -> None:
+    """A :class:`NormalMap` is a scene's only object, seen by an orthographic camera of the map's size."""
+    maps = [o for o in objects if isinstance(o, NormalMap)]
+    if not maps:
+        return
+    if len(objects) != 1:
+        raise InputError(f"objects: a NormalMap has no depth and must be the scene's only object, found "
+                         f"{len(objects)} objects")
+    h, w = maps[0].shape
+    if (camera.height, camera.width) != (h, w):
+        raise InputError(f"camera: expected {w} x {h} pixels (the NormalMap's), found {camera.width} x "
+                         f"{camera.height}")
+    if not _traced(camera.ortho_height) and not float(camera.ortho_height) > 0:
+        raise InputError("camera: a NormalMap is seen by an orthographic camera (ortho_height > 0)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -299,4 +361,5 @@ def plan_effects(scene: Scene) -> Effects:
     )
 
 
-__all__ = ["Camera", "DirectionalLight", "Effects", "Plane", "PointLight", "Scene", "Sphere", "plan_effects"]
+__all__ = ["Camera", "DirectionalLight", "Effects", "NormalMap", "Plane", "PointLight", "Scene", "Sphere",
+           "plan_effects"]

@@ -1,0 +1,258 @@
+"""Photographs under calibrated lights: the DiLiGenT-layout loader, the normal-map scenes, fits and relighting.
+
+A synthetic capture is rendered by polyjax (a known polynomial BRDF on the normal map of a sphere), written in
+DiLiGenT's layout with 16-bit PNGs, and loaded back: the float images refit exactly, the loaded (quantised) ones
+within the quantisation. The shared capture is loaded and compared with a direct pypng reading.
+"""
+
+import os
+import shutil
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import png
+import pytest
+
+import polyjax as pj
+from polyjax.render import Camera, DirectionalLight, Lambertian, NormalMap, Scene, Sphere, render
+
+H, W = 12, 14  # a small frame: the sphere's disc inside it
+LIGHTS = np.array([[0.1, 0.2, 1.0], [-0.5, 0.3, 0.8], [0.6, -0.2, 0.75], [0.0, -0.6, 0.8], [0.4, 0.5, 0.7],
+                   [-0.3, -0.4, 0.85], [0.7, 0.1, 0.7], [-0.6, -0.1, 0.8]])
+LIGHTS = LIGHTS / np.linalg.norm(LIGHTS, axis=1, keepdims=True)
+INTENSITY = np.array([[1.0, 0.9, 0.8], [1.2, 1.1, 1.3], [0.8, 0.85, 0.9], [1.1, 1.0, 0.95], [0.9, 1.05, 1.0],
+                      [1.0, 1.0, 1.1], [0.95, 0.9, 1.2], [1.15, 1.0, 0.9]])
+
+
+def sphere_normals(h=H, w=W):
+    """Normals and mask of an orthographic view of a unit sphere filling most of the frame (+y up)."""
+    ys = (h / 2 - (np.arange(h) + 0.5)) / (0.45 * h)
+    xs = ((np.arange(w) + 0.5) - w / 2) / (0.45 * h)
+    x, y = np.meshgrid(xs, ys)
+    r2 = x**2 + y**2
+    mask = r2 < 0.97
+    n = np.stack([x, y, np.sqrt(np.clip(1 - r2, 0, 1))], -1)
+    return np.where(mask[..., None], n, [0.0, 0.0, 1.0]), mask
+
+
+@pytest.fixture(scope="module")
+def truth():
+    """A polynomial BRDF (Lafortune variables, p = 2, interactions) fitted to a glossy Phong-like lobe."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(400, 3))
+    u[:, 2] = np.abs(u[:, 2]) + 0.2
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.array([0.0, 0.0, 1.0]) + 0 * u
+    r = 2 * u[:, 2:3] * np.array([0, 0, 1.0]) - u
+    lobe = 0.2 + 0.6 * np.clip(r @ np.array([0, 0, 1.0]), 0, 1) ** 2
+    values = np.stack([lobe, 0.8 * lobe, 0.6 * lobe])
+    return pj.fit_polynomial(u, v, values, "lafortune", 2, interactions=True, cutoff_deg=None)
+
+
+@pytest.fixture(scope="module")
+def synthetic(truth, tmp_path_factory):
+    """``(folder, float images (L, H, W, 3), normals, mask)``: ``truth`` rendered and written in DiLiGenT's layout
+    (16-bit PNGs, normal.txt and Normal_gt.mat)."""
+    import scipy.io
+
+    normals, mask = sphere_normals()
+    cap = pj.Capture(np.zeros((len(LIGHTS), H, W, 3)), mask, normals, LIGHTS, INTENSITY,
+                     tuple(f"{i + 1:03d}.png" for i in range(len(LIGHTS))))
+    images = np.asarray(pj.relight(truth, cap)) * 0.5  # well inside [0, 1)
+    cap = pj.Capture(images, mask, normals, LIGHTS, INTENSITY * 0.5, cap.names)
+    folder = tmp_path_factory.mktemp("photometric") / "sphPNG"
+    write_diligent(folder, cap)
+    scipy.io.savemat(folder / "Normal_gt.mat", {"Normal_gt": normals}, do_compression=True)
+    return folder, cap
+
+
+def write_diligent(folder, cap, normal_file="normal.txt"):
+    """``cap`` in DiLiGenT's layout: 16-bit PNGs of ``round(65535 x)``, 8-bit mask, exact light files."""
+    os.makedirs(folder, exist_ok=True)
+    (folder / "filenames.txt").write_text("".join(f"{n}\n" for n in cap.names))
+    (folder / "light_directions.txt").write_text("".join(" ".join(repr(float(x)) for x in d) + "\n"
+                                                         for d in cap.light_directions))
+    (folder / "light_intensities.txt").write_text("".join(" ".join(repr(float(x)) for x in e) + "\n"
+                                                          for e in cap.light_intensities))
+    for name, img in zip(cap.names, np.asarray(cap.images)):
+        px = np.round(np.clip(img, 0, 1) * 65535).astype(np.uint16)
+        with open(folder / name, "wb") as fh:
+            png.Writer(W, H, greyscale=False, bitdepth=16).write(fh, px.reshape(H, W * 3))
+    with open(folder / "mask.png", "wb") as fh:
+        png.Writer(W, H, greyscale=True, bitdepth=8).write(fh, (np.asarray(cap.mask) * 255).astype(np.uint8))
+    rows = np.asarray(cap.normals).reshape(-1, 3)
+    (folder / normal_file).write_text("".join(" ".join(repr(float(x)) for x in r) + "\n" for r in rows))
+
+
+def test_normal_map_renders_like_the_sphere():
+    """An orthographic render of a sphere and of its normal map agree pixel for pixel (the frames are the same)."""
+    h = w = 16
+    cam = Camera(eye=(0, 0, 3), width=w, height=h, ortho_height=2.2)
+    light = DirectionalLight((0.3, 0.5, 1.0), (1.0, 0.8, 0.6))
+    brdf = pj.render.Phong(0.3, 0.5, 12.0)
+    ref = render(Scene(cam, [Sphere(brdf)], [light]), dtype=jnp.float64)
+    o, d = (np.asarray(a) for a in cam.rays())
+    hit = np.asarray(ref.hit).reshape(-1)
+    b = np.sum(o * d, -1)
+    t = -b - np.sqrt(np.maximum(b * b - (np.sum(o * o, -1) - 1), 0))
+    n = np.where(hit[:, None], o + t[:, None] * d, [0, 0, 1.0])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    img = render(Scene(cam, [NormalMap(brdf, n.reshape(h, w, 3), hit.reshape(h, w))], [light]), dtype=jnp.float64)
+    np.testing.assert_allclose(np.asarray(img.image), np.asarray(ref.image), atol=1e-9)
+
+
+def test_load_equals_direct_png_reading(synthetic):
+    folder, cap = synthetic
+    loaded = pj.data.load_photometric(folder)
+    for name, img in zip(loaded.names, np.asarray(loaded.images)):
+        w, h, rows, info = png.Reader(filename=str(folder / name)).read()
+        assert info["bitdepth"] == 16
+        direct = np.array([np.asarray(r, float) for r in rows]).reshape(h, w, 3) / 65535
+        np.testing.assert_array_equal(img, direct)
+    np.testing.assert_array_equal(np.asarray(loaded.mask), np.asarray(cap.mask))
+    np.testing.assert_allclose(np.asarray(loaded.normals), np.asarray(cap.normals), atol=1e-15)
+    np.testing.assert_allclose(loaded.light_directions, cap.light_directions, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(loaded.light_intensities, cap.light_intensities)
+    assert np.max(np.abs(np.asarray(loaded.images) - np.asarray(cap.images))) <= 0.5 / 65535 + 1e-15
+    sub = pj.data.load_photometric(folder, lights=[1, 3])
+    np.testing.assert_array_equal(np.asarray(sub.images), np.asarray(loaded.images)[[1, 3]])
+    assert sub.names == (loaded.names[1], loaded.names[3])
+
+
+def test_mat_reader_matches_scipy(synthetic):
+    import scipy.io
+
+    folder, cap = synthetic
+    ref = scipy.io.loadmat(folder / "Normal_gt.mat")["Normal_gt"]
+    np.testing.assert_array_equal(pj.data.read_mat_array(str(folder / "Normal_gt.mat"), "Normal_gt"), ref)
+
+
+def test_float_capture_refits_exactly(truth, synthetic):
+    """Images rendered from a polynomial of the fitted space give it back: predictions to 1e-8 (every fit path),
+    and the 16-bit capture within its quantisation."""
+    folder, cap = synthetic
+    for opts in (dict(), dict(weighting="brdf", robust_steps=1)):
+        model = pj.fit_polynomial_to_images(cap.scenes, cap.images, "lafortune", 2, interactions=True,
+                                            cutoff_deg=None, **opts)
+        assert np.all(np.asarray(model.status) == 0)
+        np.testing.assert_allclose(np.asarray(pj.relight(model, cap)), np.asarray(cap.images), atol=1e-8, rtol=0)
+    loaded = pj.data.load_photometric(folder)
+    model = pj.fit_polynomial_to_images(loaded.scenes, loaded.images, "lafortune", 2, interactions=True,
+                                        cutoff_deg=None, saturation=loaded.saturation)
+    err = np.abs(np.asarray(pj.relight(model, loaded)) - np.asarray(cap.images))
+    assert err.max() < 2 / 65535  # the fit averages the rounding error of 1/2 step
+
+
+def test_log_link_fit_from_images(synthetic):
+    """``link="log"`` fits from the capture's scenes and predicts its images closely (a smooth lobe)."""
+    _, cap = synthetic
+    model = pj.fit_polynomial_to_images(cap.scenes, cap.images, "lafortune", 2, interactions=True, cutoff_deg=None,
+                                        link="log", weighting="brdf")
+    rel = np.linalg.norm(np.asarray(pj.relight(model, cap)) - cap.images) / np.linalg.norm(cap.images)
+    assert model.link == "log" and rel < 0.02
+
+
+def _break(folder, tmp_path, what):
+    bad = tmp_path / "bad"
+    shutil.copytree(folder, bad)
+    if what == "missing image":
+        os.remove(bad / "003.png")
+    elif what == "light count":
+        with open(bad / "light_directions.txt", "a") as fh:
+            fh.write("0 0 1\n")
+    elif what == "8-bit":
+        with open(bad / "002.png", "wb") as fh:
+            png.Writer(W, H, greyscale=False, bitdepth=8).write(fh, np.zeros((H, W * 3), np.uint8))
+    elif what == "normals":
+        os.remove(bad / "Normal_gt.mat")
+        rows = np.loadtxt(bad / "normal.txt")
+        rows[5 * W + 7] *= 1.1
+        np.savetxt(bad / "normal.txt", rows)
+    return bad
+
+
+@pytest.mark.parametrize("what, error, named", [
+    ("missing image", pj.DataNotFoundError, "003.png"),
+    ("light count", pj.DataFormatError, "light_directions.txt"),
+    ("8-bit", pj.DataFormatError, "002.png"),
+    ("normals", pj.DataFormatError, "normal.txt"),
+])
+def test_bad_captures_name_the_file(synthetic, tmp_path, what, error, named):
+    bad = _break(synthetic[0], tmp_path, what)
+    with pytest.raises(error, match=named):
+        pj.data.load_photometric(bad)
+
+
+def test_bad_arguments(synthetic):
+    folder, cap = synthetic
+    with pytest.raises(pj.InputError, match="lights"):
+        pj.data.load_photometric(folder, lights=[0, 99])
+    with pytest.raises(pj.DataNotFoundError):
+        pj.data.load_photometric(folder / "nowhere")
+    with pytest.raises(pj.InputError, match="weighting"):
+        pj.fit_polynomial_to_images(cap.scenes, cap.images, "lafortune", 1, weighting="pixels")
+    with pytest.raises(pj.InputError, match="only object"):
+        Scene(cap.scenes[0].camera, [cap.scenes[0].objects[0], Sphere(Lambertian(0.5))], [DirectionalLight()])
+    with pytest.raises(pj.InputError, match="unit normals"):
+        NormalMap(Lambertian(0.5), np.full((2, 2, 3), 0.5))
+
+
+@pytest.mark.parametrize("opts", [dict(), dict(weighting="brdf", robust_steps=1)])
+def test_fit_derivative_wrt_images_matches_finite_differences(synthetic, opts):
+    """d(prediction . r) / d(images) of the fit, against central differences in a random direction."""
+    _, cap = synthetic
+    small = cap.select([0, 1, 2, 3, 4])
+    scenes = small.scenes
+    rng = np.random.default_rng(1)
+    direction = rng.normal(size=small.images.shape) * np.asarray(small.mask)[None, ..., None]
+    probe = jnp.asarray(rng.normal(size=(3, 3)))
+    dirs = jnp.asarray(LIGHTS[5:8])
+
+    def objective(images):
+        m = pj.fit_polynomial_to_images(scenes, images, "lafortune", 2, interactions=True, cutoff_deg=None, **opts)
+        return jnp.sum(m(dirs, jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), dirs.shape)) * probe)
+
+    x = jnp.asarray(small.images + 0.01 * rng.normal(size=small.images.shape))
+    g = jax.grad(objective)(x)
+    h = 1e-5
+    fd = (objective(x + h * direction) - objective(x - h * direction)) / (2 * h)
+    np.testing.assert_allclose(float(jnp.sum(g * direction)), float(fd), rtol=1e-5, atol=1e-9)
+
+
+def test_fit_photos_and_relight_command_line(synthetic, tmp_path, capsys):
+    from polyjax._cli import main
+
+    folder, cap = synthetic
+    model = tmp_path / "model.npz"
+    with pytest.raises(SystemExit):
+        main(["fit-photos", str(folder)])  # --save is required
+    assert main(["--no-cache", "fit-photos", str(folder), "--lights", "0:8:2", "--variables", "lafortune",
+                 "--degree", "2", "--save", str(model)]) == 0
+    assert model.is_file()
+    assert main(["--no-cache", "fit-photos", str(folder), "--save", str(tmp_path / "none" / "m.npz")]) == 2
+    out = tmp_path / "relit"
+    capsys.readouterr()
+    assert main(["--no-cache", "relight", str(model), str(folder), "--lights", "1,3", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "relative RMS" in text
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(f"{s}_{k}.{e}" for s in ("002", "004") for k in ("predicted", "error")
+                           for e in ("exr", "png"))
+    pred = pj.render.read_exr(out / "002_predicted.exr")
+    assert np.max(np.abs(pred - cap.images[1])) < 1e-3  # noise-free data: the held-out light is predicted
+    (tmp_path / "file").write_text("x")
+    assert main(["--no-cache", "relight", str(model), str(folder), "--out", str(tmp_path / "file")]) == 2
+
+
+@pytest.mark.data
+def test_diligent_ball_loads(data_root):
+    """The shared DiLiGenT ball: 16 bits kept, normals from the .mat file, images in camera units."""
+    folder = os.path.join(data_root, "diligent", "ballPNG")
+    cap = pj.data.load_photometric(folder, lights=[0, 5])
+    assert cap.images.shape == (2, 512, 612, 3) and int(np.sum(cap.mask)) == 15791
+    w, h, rows, _ = png.Reader(filename=os.path.join(folder, cap.names[1])).read()
+    direct = np.array([np.asarray(r, float) for r in rows]).reshape(h, w, 3) / 65535
+    np.testing.assert_array_equal(cap.images[1], direct)
+    assert len(np.unique(np.round(cap.images[1] * 65535) % 256)) > 200  # not 8-bit values scaled
+    np.testing.assert_allclose(np.linalg.norm(cap.normals[cap.mask], axis=-1), 1.0, atol=1e-6)
