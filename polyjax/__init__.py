@@ -10,8 +10,8 @@ for fitting; polyjax does not change global JAX settings on import.
 from . import data
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
-from ._capture import Capture, relight
 from ._cache import CACHE_ENV, default_cache_dir, enable_compilation_cache
+from ._capture import Capture, relight
 from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
 from ._errors import DataFormatError, DataNotFoundError, FitError, InputError, PolyjaxError, UnknownNameError

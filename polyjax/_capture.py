@@ -79,6 +79,19 @@ class Capture(eqx.Module):
         return Capture(self.images[idx], self.mask, self.normals, self.light_directions[idx],
                        self.light_intensities[idx], tuple(self.names[i] for i in idx), self.saturation)
 
+    def cropped(self, margin: int = 2) -> "Capture":
+        """The capture cropped to the mask's bounding box plus ``margin`` pixels (the same fits, fewer pixels to
+        trace); its images are no longer the camera's full frame."""
+        mask = np.asarray(self.mask)
+        if not mask.any():
+            raise InputError("mask: expected at least one object pixel to crop to")
+        ys, xs = np.nonzero(mask)
+        h, w = mask.shape
+        r = slice(max(ys.min() - margin, 0), min(ys.max() + margin + 1, h))
+        c = slice(max(xs.min() - margin, 0), min(xs.max() + margin + 1, w))
+        return Capture(self.images[:, r, c], self.mask[r, c], self.normals[r, c], self.light_directions,
+                       self.light_intensities, self.names, self.saturation)
+
     def strided(self, step: int) -> "Capture":
         """Every ``step``-th pixel in each direction (a smaller capture of the same object, for fast fits)."""
         if int(step) != step or int(step) < 1:

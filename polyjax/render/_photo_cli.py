@@ -18,7 +18,7 @@ from .._errors import InputError
 
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``)
 DEFAULTS = dict(variables="rusinkiewicz", degree=8, interactions=True, link="identity", weighting="brdf",
-                robust_steps=2, cutoff=90.0)
+                robust_steps=0, cutoff=90.0)
 
 
 def parse_lights(text: str | None):
@@ -57,7 +57,7 @@ def add_photo_parsers(subparsers, parents=()) -> None:
     f.add_argument("--weighting", default=DEFAULTS["weighting"], choices=["brdf", "radiance"],
                    help="residual space (default brdf: the pixels' BRDF samples)")
     f.add_argument("--robust-steps", type=int, default=DEFAULTS["robust_steps"],
-                   help="Tukey-reweighted solves after the first (default 2; 0: plain least squares)")
+                   help="Tukey-reweighted solves after the first (default 0: plain least squares)")
     f.add_argument("--cutoff", type=float, default=DEFAULTS["cutoff"], help="grazing cutoff in degrees (default 90)")
     f.add_argument("--save", required=True, help="the model file to write (.npz or .json)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
@@ -100,7 +100,7 @@ def run_fit_photos(args) -> int:
     import polyjax as pj
 
     save = _check_writable_file(args.save)
-    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights))
+    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
     t0 = time.perf_counter()
     model = pj.fit_polynomial_to_images(
         capture.scenes, capture.images, args.variables, args.degree, saturation=capture.saturation,
