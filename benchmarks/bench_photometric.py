@@ -88,10 +88,11 @@ def rusinkiewicz(u, v):
 
 def nearest_neighbour(train, test, k):
     """The anchor: each held-out pixel's BRDF value the mean of the ``k`` nearest fitted samples ``I / c`` in
-    ``(theta_h, theta_d, phi_d)``, times its light weight."""
+    ``(theta_h, theta_d, phi_d)``, times its light weight. The samples are those within the 80-degree cutoff (with
+    every sample, the noisy grazing ones, ``I / (E cos)``, raise its error from 0.076 to 0.097)."""
     from scipy.spatial import cKDTree
 
-    u, v, c, y = brdf_samples(train)
+    u, v, c, y = brdf_samples(train, cutoff_deg=80.0)  # its better setting: grazing samples I / (E cos) are noisy
     tree = cKDTree(rusinkiewicz(u, v))
     b = y / c
     rows = pj.image_rows(test.scenes, np.zeros_like(test.images), compact=False, cutoff_deg=None)

@@ -65,14 +65,22 @@ def samples_of_rows(rows, weighting: str):
 def tukey_weights(model, u, v, values, mask):
     """Tukey biweight multipliers ``(n,)`` of the relative residuals of ``model`` on the samples (module notes);
     0 off ``mask``."""
-    f = model(u, v)  # (3, n)
-    fm = jnp.where(mask, jnp.mean(jnp.abs(f), axis=0), jnp.nan)
-    m = jnp.nanmedian(fm)
-    t = jnp.sqrt(jnp.mean(((values - f) / (jnp.abs(f) + m)) ** 2, axis=0))
-    tk = jnp.where(mask, t, jnp.nan)
-    s = MAD_SCALE * jnp.nanmedian(jnp.abs(tk - jnp.nanmedian(tk)))
+    f = jnp.where(mask, model(u, v), 0.0)  # (3, n); rows off the mask never reach a NaN (nor its derivative)
+    b = jnp.where(mask, values, 0.0)
+    m = masked_median(jnp.mean(jnp.abs(f), axis=0), mask)
+    t = jnp.sqrt(jnp.mean(((b - f) / (jnp.abs(f) + jnp.where(m > 0, m, 1.0))) ** 2, axis=0) + 1e-300)
+    s = MAD_SCALE * masked_median(jnp.abs(t - masked_median(t, mask)), mask)
     z = t / (TUKEY_C * jnp.where(s > 0, s, 1.0))
-    return jnp.where(mask & (z < 1), (1 - z**2) ** 2, 0.0)
+    return jnp.where(mask & (z < 1), (1 - jnp.minimum(z, 1.0) ** 2) ** 2, 0.0)
+
+
+def masked_median(x, mask):
+    """The median of ``x`` where ``mask`` (the mean of the two middle values for an even count), by a sort: exact
+    derivative almost everywhere (that of the middle values)."""
+    xs = jnp.sort(jnp.where(mask, x, jnp.inf))
+    k = jnp.maximum(jnp.sum(mask), 1)
+    lo, hi = xs[(k - 1) // 2], xs[k // 2]
+    return 0.5 * (lo + hi)
 
 
 def fit_samples(rows, variables, degree, *, weighting, robust_steps, options):
@@ -92,4 +100,5 @@ def fit_samples(rows, variables, degree, *, weighting, robust_steps, options):
 _robust = jax.jit(tukey_weights)
 
 
-__all__ = ["BRDF_COS_FLOOR", "TUKEY_C", "WEIGHTINGS", "fit_samples", "samples_of_rows", "tukey_weights"]
+__all__ = ["BRDF_COS_FLOOR", "TUKEY_C", "WEIGHTINGS", "fit_samples", "masked_median", "samples_of_rows",
+           "tukey_weights"]

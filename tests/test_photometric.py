@@ -198,7 +198,7 @@ def test_bad_arguments(synthetic):
         NormalMap(Lambertian(0.5), np.full((2, 2, 3), 0.5))
 
 
-@pytest.mark.parametrize("opts", [dict(), dict(weighting="brdf")])
+@pytest.mark.parametrize("opts", [dict(), dict(weighting="brdf", robust_steps=1)])
 def test_fit_derivative_wrt_images_matches_finite_differences(synthetic, opts):
     """d(prediction . r) / d(images) of the fit, against central differences in a random direction."""
     _, cap = synthetic
