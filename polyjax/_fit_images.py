@@ -115,7 +115,8 @@ def fit_polynomial_to_images(
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any
         fitted model. ``l2`` holds the root-mean-square radiance residual over the kept pixels (image
-        units, not equation (11)); ``n_used`` the number of kept pixels; ``status`` ``NO_SAMPLES`` when
+        units, not equation (11); with ``link="log"``, ``weighting="brdf"`` or robust steps, equation (11) of the
+        BRDF samples with their weights); ``n_used`` the number of kept pixels; ``status`` ``NO_SAMPLES`` when
         no pixel was kept and ``RANK_DEFICIENT`` when the pixels do not determine every coefficient.
 
     Raises:
