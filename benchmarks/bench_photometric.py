@@ -224,7 +224,7 @@ def _report(table, fits, default_label, train, test):
     for label, rel, ps, s in table:
         print(f"| {label} | {rel:.4f} | {rel / anchor:.3f} | {ps:.2f} | {s:.2f} |")
     print(f"\nbest closed form: {best[0]}: {best[1] / anchor:.3f}x the anchor (target <= 0.9); fit-photos defaults: "
-          f"{default[1] / anchor:.3f}x (target <= 1.0); fastest polynomial fit {min(r[3] for r in closed):.2f} s, "
+          f"{default[1] / anchor:.3f}x (target <= 1.0); fastest closed-form fit {min(r[3] for r in closed):.2f} s, "
           f"the defaults' {default[3]:.2f} s (target < 1 s)")
     model = fits[best[0]]
     noise = noise_estimate(test)
