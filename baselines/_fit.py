@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import polyjax as pj
-from polyjax import InputError, Result, raise_on_status
+from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._implicit import implicit_optimum
 from ._multistart import fit_kernel
@@ -46,6 +46,7 @@ from ._starts import check_n_starts
 from ._zernike import fit_zernike
 
 
+@one_lapack_thread
 def fit(
     name: str,
     u,

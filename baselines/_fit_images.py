@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 import polyjax as pj
-from polyjax import InputError, Result, raise_on_status
+from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._fit import fit
 from ._light_sums import light_sum_kernel, package
@@ -42,6 +42,7 @@ from ._starts import check_n_starts
 _LIGHT_SUM_OPTIONS = ("max_steps", "rtol", "atol", "stage_steps", "throw")
 
 
+@one_lapack_thread
 def fit_to_images(
     name: str,
     scenes: Sequence,
