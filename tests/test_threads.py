@@ -78,6 +78,7 @@ def test_one_lapack_thread_inside_calls_and_the_users_setting_outside():
 
 
 def test_switch_off_leaves_the_libraries_alone(monkeypatch):
+    from scipy.linalg import cython_lapack  # noqa: F401 - jaxlib's LAPACK library loaded before the user's limit
     from threadpoolctl import threadpool_info, threadpool_limits
 
     seen = []
