@@ -122,9 +122,19 @@ def test_sphere_matches_polyjax_render(browser, page, model):
     _open(browser, page)
     shot = browser.screenshot("#sphereA")
     assert shot.shape == (SIZE, SIZE, 3)
-    value = psnr8(shot, reference(model, LIGHT))
-    print(f"sphere vs pj.render: PSNR {value:.1f} dB")
+    expected = reference(model, LIGHT)
+    assert expected.mean() > 20 and (expected.max(axis=(0, 1)) > 150).all()  # a lit sphere, not a blank image
+    value = psnr8(shot, expected)
+    print(f"sphere vs pj.render: PSNR {value:.1f} dB, {np.mean(shot != expected):.4f} of the values differ")
     assert value >= 35.0
+    # one stop more exposure: 2^1 L before sRGB, as polyjax.render.to_srgb
+    frame = browser.evaluate("window.polyjaxView.frame")
+    browser.evaluate("(() => { const e = document.getElementById('exposure'); e.value = '1'; "
+                     "e.dispatchEvent(new Event('input')); })()")
+    browser.wait_for(f"window.polyjaxView.frame > {frame}")
+    brighter = browser.screenshot("#sphereA")
+    assert psnr8(brighter, reference(model, LIGHT, exposure=1.0)) >= 35.0
+    assert psnr8(brighter, shot) < 30.0
 
 
 def test_dragging_the_light_changes_the_image_as_the_renderer_predicts(browser, page, model):
@@ -228,6 +238,52 @@ def test_serve_answers_on_loopback_only(model, tmp_path):
     finally:
         proc.terminate()
         proc.wait(30)
+
+
+def test_models_without_an_expression_are_tabulated_on_the_merl_grid(model):
+    from _sampling_problems import cook_torrance
+
+    ct = cook_torrance()
+    items = pj.view.as_items([("ct", ct), ("fit", model)], resolution=(8, 8, 16))
+    assert [i.kind for i in items] == ["table", "program"]
+    assert "tabulated" in items[0].info["shown as"]
+    u, v, _, above = pj.data.merl_grid((8, 8, 16))
+    expected = np.where(above[:, None], np.asarray(pj.render.evaluate_rgb(ct, u, v)), 0.0)
+    np.testing.assert_allclose(items[0].table.reshape(-1, 3), expected, rtol=1e-6, atol=1e-7)
+    with pytest.raises(pj.DataNotFoundError, match="no-such"):
+        pj.view.as_items(["no-such.json"])
+
+
+@pytest.mark.slow
+def test_report_html_is_a_page_of_the_reports_fits(browser, tmp_path, monkeypatch, capsys):
+    from polyjax._cli import main
+
+    monkeypatch.delenv(pj.DATA_ENV, raising=False)
+    out = tmp_path / "report.html"
+    assert main(["report", "--html", str(out)]) == 0
+    assert "L2 for p = 1..8" in capsys.readouterr().out
+    _open(browser, out)
+    assert browser.evaluate("window.polyjaxView.items") == [
+        "synthetic-matte", "ashikhmin-shirley p=5", "lafortune p=7", "ward p=7"]
+    assert "L2 for p = 1..8" in browser.evaluate("document.getElementById('text').textContent")
+    assert browser.evaluate("window.polyjaxView.points.relative_rms") < 0.5  # the data against the first fit
+    assert browser.errors() == []
+
+
+@pytest.mark.data
+def test_neural_fits_run_their_network_in_the_page(browser, tmp_path):
+    nbrdf = pj.data.load_nbrdf("gold-metallic-paint")
+    path = pj.view.write_page([("nbrdf", nbrdf)], tmp_path / "nbrdf.html",
+                              settings=pj.view.ViewSettings(size=32))
+    _open(browser, path)
+    polar = browser.evaluate("window.polyjaxView.polar[0]")
+    u = np.asarray(polar["u"], float).reshape(-1, 3)[4:-4:5]
+    v = np.asarray(polar["v"], float).reshape(-1, 3)[4:-4:5]
+    assert len(u) == 17
+    expected = np.asarray(nbrdf(u, v))
+    np.testing.assert_allclose(np.asarray(polar["values"], float)[4:-4:5], expected, rtol=1e-3,
+                               atol=1e-4 * expected.max())
+    assert browser.errors() == []
 
 
 @pytest.mark.data

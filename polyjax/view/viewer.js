@@ -154,15 +154,20 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     }
   }
 
+  // a canvas of w x h pixels; its figure as wide as it (captions wrap under it), both shrinking with the window
+  function sized(c, w, h) {
+    c.width = w; c.height = h;
+    if (c.parentElement.tagName === "FIGURE") c.parentElement.style.width = w + "px";
+    return c;
+  }
+
   function drawTo(canvasId, p, uniforms, w, h) {
     glCanvas.width = w; glCanvas.height = h;
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.viewport(0, 0, w, h);
     use(p, Object.assign({ res: [w, h] }, uniforms));
     gl.drawArrays(gl.TRIANGLES, 0, 3);
-    const c = $(canvasId), ctx = c.getContext("2d");
-    c.width = w; c.height = h;
-    ctx.drawImage(glCanvas, 0, 0);
+    sized($(canvasId), w, h).getContext("2d").drawImage(glCanvas, 0, 0);
   }
 
   // evaluate item k at n direction pairs on the GPU (float render target); returns Float32Array (n, 4)
@@ -305,7 +310,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
   const COLOURS = ["#f55", "#5d5", "#58f"];
 
   function drawPolar(curves) {
-    const c = $("polar"), n = S.size; c.width = n; c.height = n; const ctx = c.getContext("2d");
+    const n = S.size, c = sized($("polar"), n, n), ctx = c.getContext("2d");
     plotAxes(ctx, n, n);
     const cx = n / 2, cy = n - 8, R0 = n / 2 - 10;
     ctx.beginPath(); ctx.arc(cx, cy, R0, Math.PI, 2 * Math.PI); ctx.moveTo(cx - R0, cy); ctx.lineTo(cx + R0, cy); ctx.stroke();
@@ -324,7 +329,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
   }
 
   function drawCurves(id, curves, xkey, xmax, label) {
-    const c = $(id), n = S.size; c.width = n; c.height = n; const ctx = c.getContext("2d");
+    const n = S.size, c = sized($(id), n, n), ctx = c.getContext("2d");
     plotAxes(ctx, n, n);
     const x0 = 24, y0 = n - 16, W = n - x0 - 6, H = n - 30;
     let ymax = 1e-12;
@@ -351,7 +356,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
       if (fit) { for (let ch = 0; ch < 3; ch++) { se += (fit[4 * i + ch] - meas[3 * i + ch]) ** 2; sm += meas[3 * i + ch] ** 2; } }
     }
     if (!(ymax > ymin)) { ymin = -3; ymax = 1; }
-    const c = $("points"), w = 2 * S.size, hgt = S.size; c.width = w; c.height = hgt; const ctx = c.getContext("2d");
+    const w = 2 * S.size, hgt = S.size, c = sized($("points"), w, hgt), ctx = c.getContext("2d");
     plotAxes(ctx, w, hgt);
     const X = (t) => 30 + (w - 40) * t / 90, Y = (y) => hgt - 16 - (hgt - 30) * (Math.log10(Math.max(y, 1e-30)) - ymin) / (ymax - ymin);
     for (let i = 0; i < n; i++) {
