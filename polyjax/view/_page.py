@@ -110,6 +110,7 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
     from .._outputs import check_output_file
 
     path = check_output_file(path, "out")
+    _check_settings(settings)  # before the items' work
     text = page_html(as_items(objects, resolution, root), settings)
     path.write_text(text, encoding="utf-8")
     return path
