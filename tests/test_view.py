@@ -201,6 +201,67 @@ def test_polar_plot_matches_the_model(browser, page, model):
     np.testing.assert_allclose(np.asarray(albedo["values"])[below], 0.6, rtol=2e-3)
 
 
+def _environment_reference(model, env, size):
+    """The page's sphere under ``env`` and the light: pj.render's point-light image plus the midpoint rule over the
+    map's texels (docs/viewer.md) on the renderer's primary rays and sphere frames; misses see the map."""
+    r = pj.render
+    cam = r.Camera(width=size, height=size)
+    light = np.asarray(r.render(r.Scene(cam, [r.Sphere(model)], [r.PointLight(LIGHT, INTENSITY)])).image)
+    o, d = (np.asarray(a, np.float64) for a in cam.rays())
+    b = np.sum(o * d, -1)
+    disc = b * b - np.sum(o * o, -1) + 1.0
+    hit = disc >= 0
+    n = o + (-b - np.sqrt(np.maximum(disc, 0)))[:, None] * d
+    tx = np.stack([n[:, 2], 0 * n[:, 0], -n[:, 0]], -1)
+    tx /= np.linalg.norm(tx, axis=-1, keepdims=True)
+    bx = np.cross(n, tx)
+    h, w = env.shape[:2]
+    th, ph = np.meshgrid((np.arange(h) + 0.5) * np.pi / h, (np.arange(w) + 0.5) * 2 * np.pi / w - np.pi, indexing="ij")
+    dirs = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1).reshape(-1, 3)
+    weight = env.reshape(-1, 3) * (np.sin(th) * (np.pi / h) * (2 * np.pi / w)).reshape(-1, 1)
+    local = lambda x: np.stack([x @ tx.T, x @ bx.T, x @ n.T], -1)  # noqa: E731 - (K, P, 3)
+    ul = local(dirs)
+    vl = np.broadcast_to(local(-d)[np.arange(len(d)), np.arange(len(d))], ul.shape)
+    f = np.asarray(r.evaluate_rgb(r.rgb_brdf(model), ul.reshape(-1, 3), np.ascontiguousarray(vl).reshape(-1, 3)))
+    cos = np.maximum(ul[..., 2], 0.0)
+    env_term = np.einsum("kpc,kp,kc->pc", f.reshape(ul.shape), cos, weight)
+    theta, phi = np.arccos(np.clip(d[:, 1], -1, 1)), np.arctan2(d[:, 0], -d[:, 2])
+    i = np.clip(np.floor(theta / np.pi * h).astype(int), 0, h - 1)
+    j = np.clip(np.floor((phi + np.pi) / (2 * np.pi) * w).astype(int), 0, w - 1)
+    image = np.where(hit[:, None], light.reshape(-1, 3) + env_term, env[i, j]).reshape(size, size, 3)
+    return np.round(r.to_srgb(image) * 255).astype(np.uint8)
+
+
+def _power(m):
+    """``int L dw`` of a latitude-longitude map (midpoint rule over its texels)."""
+    h, w = m.shape[:2]
+    return np.sum(m * np.sin((np.arange(h) + 0.5) * np.pi / h)[:, None, None]) * (np.pi / h) * (2 * np.pi / w)
+
+
+def test_environment_map_lights_the_sphere_by_quadrature(browser, model, tmp_path):
+    rng = np.random.default_rng(7)
+    env = rng.uniform(0.05, 0.6, (32, 64, 3))  # averaged down to 16 x 32 by solid angle
+    coarse = pj.view.environment_map(env)
+    assert _power(coarse) == pytest.approx(_power(env), rel=1e-6)  # the map's power is kept
+    size = 32
+    path = pj.view.write_page([("fit", model)], tmp_path / "env.html", settings=pj.view.ViewSettings(
+        size=size, light=LIGHT, intensity=INTENSITY, environment=env))
+    _open(browser, path)
+    lit = browser.screenshot("#sphereA")
+    value = psnr8(lit, _environment_reference(model, coarse.astype(np.float64), size))
+    print(f"environment-lit sphere vs the quadrature on pj.render's rays: PSNR {value:.1f} dB")
+    assert value >= 35.0
+    frame = browser.evaluate("window.polyjaxView.frame")
+    browser.evaluate("document.getElementById('environment').click()")  # off: the point light alone
+    browser.wait_for(f"window.polyjaxView.frame > {frame}")
+    assert browser.evaluate("window.polyjaxView.state.environment") is False
+    shot = browser.screenshot("#sphereA")
+    r = pj.render
+    alone = r.render(r.Scene(r.Camera(width=size, height=size), [r.Sphere(model)], [r.PointLight(LIGHT, INTENSITY)]))
+    assert psnr8(shot, np.round(r.to_srgb(np.asarray(alone.image)) * 255).astype(np.uint8)) >= 35.0
+    assert browser.errors() == []
+
+
 def test_missing_webgl2_is_a_message_on_the_page(browser, page):
     script = browser.send("Page.addScriptToEvaluateOnNewDocument", {"source": (
         "const g = HTMLCanvasElement.prototype.getContext; HTMLCanvasElement.prototype.getContext = "

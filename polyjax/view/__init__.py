@@ -13,9 +13,10 @@ Typical use::
     pj.view.serve_page("page.html")                    # http://127.0.0.1:<port>/ only
 """
 
+from ._environment import environment_map
 from ._items import DENSE_FRACTION, MERL_RESOLUTION, ViewItem, as_items, data_items, items_from_argument, model_items
 from ._page import ViewSettings, page_html, write_page
 from ._serve import serve_page
 
-__all__ = ["DENSE_FRACTION", "MERL_RESOLUTION", "ViewItem", "ViewSettings", "as_items", "data_items",
+__all__ = ["DENSE_FRACTION", "MERL_RESOLUTION", "ViewItem", "ViewSettings", "as_items", "data_items", "environment_map",
            "items_from_argument", "model_items", "page_html", "serve_page", "write_page"]

@@ -35,6 +35,9 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--port", type=int, default=8000, help="port for --serve (default 8000; 0: any free port)")
     p.add_argument("--size", type=int, default=256, help="canvas size in pixels (default 256)")
     p.add_argument("--exposure", type=float, default=0.0, help="initial exposure in stops (default 0)")
+    p.add_argument("--environment", default=None, metavar="sky|FILE.exr",
+                   help="also light the sphere with an environment map: the built-in sky or a latitude-longitude "
+                   "OpenEXR map (averaged down to 16 x 32 texels)")
     p.add_argument("--table-resolution", default="90,90,180",
                    help="MERL-grid bins N_h,N_d,N_p of tables: tabulated models and binned dense data "
                    "(default 90,90,180, MERL's own grid; smaller: a smaller page)")
@@ -52,7 +55,7 @@ def run_view(args) -> int:
         from .._errors import InputError
 
         raise InputError(f"--port: expected 0 (any free port) or a port in [1, 65535], found {args.port}")
-    settings = ViewSettings(size=args.size, exposure=args.exposure)
+    settings = ViewSettings(size=args.size, exposure=args.exposure, environment=args.environment)
     write_page(args.items, out, settings=settings, resolution=_resolution(args.table_resolution),
                root=getattr(args, "data_root", None))
     print(f"wrote {out}", flush=True)

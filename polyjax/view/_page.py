@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InputError
+from ._environment import environment_json
 from ._glsl import brdf_functions
 from ._items import MERL_RESOLUTION, ViewItem, as_items
 
@@ -39,6 +40,9 @@ class ViewSettings:
         exposure: ``2^exposure`` before sRGB encoding.
         title: the page title.
         text: optional preformatted text shown under the views (e.g. a report).
+        environment: optional environment map lighting the sphere besides the light: an
+            ``polyjax.render.EnvironmentLight``, an ``(H, W, 3)`` latitude-longitude map, ``"sky"`` or an OpenEXR
+            path (:func:`polyjax.view._environment.environment_map`: averaged down to 16 x 32 texels).
     """
 
     size: int = 256
@@ -51,6 +55,7 @@ class ViewSettings:
     exposure: float = 0.0
     title: str = "polyjax view"
     text: str = ""
+    environment: object = None
 
 
 def _check_settings(s: ViewSettings) -> None:
@@ -58,7 +63,7 @@ def _check_settings(s: ViewSettings) -> None:
         raise InputError(f"size: expected a canvas size in [8, 4096] pixels, found {s.size}")
     if not 0.0 < float(s.fov_deg) < 180.0:
         raise InputError(f"fov_deg: expected a field of view in (0, 180) degrees, found {s.fov_deg}")
-    for name in ("eye", "target", "up", "light"):
+    for name in ("eye", "target", "up", "light"):  # tuples of floats (JSON)
         a = np.asarray(getattr(s, name), float)
         if a.shape != (3,) or not np.all(np.isfinite(a)):
             raise InputError(f"{name}: expected a finite 3-vector, found {getattr(s, name)!r}")
@@ -89,7 +94,9 @@ def _template(name: str) -> str:
 def page_html(items: list[ViewItem], settings: ViewSettings = ViewSettings()) -> str:
     """The page's HTML text for ``items`` (:class:`polyjax.view.ViewItem`) and ``settings``."""
     _check_settings(settings)
-    data = {"settings": {k: v for k, v in dataclasses.asdict(settings).items() if k != "text"},
+    data = {"settings": {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
+                         if f.name not in ("text", "environment")},
+            "environment": environment_json(settings.environment),
             "items": [_item_json(i, it) for i, it in enumerate(items)]}
     parts = {
         "TITLE": html.escape(settings.title),

@@ -57,15 +57,38 @@ vec3 merl_lookup(sampler3D t, vec3 n, vec3 u, vec3 v) {
 
   const SPHERE = `
 uniform vec2 res; uniform vec3 eye, camW, camR, camU, lightPos, lightI; uniform float halfH, exposure, gain;
-uniform int itemA, itemB, mode;
+uniform int itemA, itemB, mode, envOn; uniform sampler2D envTex;
 out vec4 color;
+// the environment map by the midpoint rule over its texels (polyjax.view._environment): sum L f cos+ dW
+vec3 envTerm(int k, vec3 n, vec3 tx, vec3 bx, vec3 vl) {
+  ivec2 sz = textureSize(envTex, 0); vec3 acc = vec3(0.0);
+  for (int i = 0; i < sz.y; i++) {
+    float th = (float(i) + 0.5) * PI / float(sz.y), st = sin(th), ct = cos(th);
+    float dw = st * (PI / float(sz.y)) * (2.0 * PI / float(sz.x));
+    for (int j = 0; j < sz.x; j++) {
+      float ph = (float(j) + 0.5) * 2.0 * PI / float(sz.x) - PI;
+      vec3 d = vec3(st * sin(ph), ct, -st * cos(ph)); float c = dot(n, d);
+      if (c <= 0.0) continue;
+      acc += max(brdf(k, vec3(dot(d, tx), dot(d, bx), c), vl), 0.0) * texelFetch(envTex, ivec2(j, i), 0).rgb * (c * dw);
+    }
+  }
+  return acc;
+}
+vec3 envRadiance(vec3 d) {  // EnvironmentLight.radiance: the texel the direction falls in
+  ivec2 sz = textureSize(envTex, 0);
+  float th = acos(clamp(d.y, -1.0, 1.0)), ph = atan(d.x, -d.z);
+  int i = clamp(int(floor(th / PI * float(sz.y))), 0, sz.y - 1), j = clamp(int(floor((ph + PI) / (2.0 * PI) * float(sz.x))), 0, sz.x - 1);
+  return texelFetch(envTex, ivec2(j, i), 0).rgb;
+}
 void main() {
   float X = (2.0 * gl_FragCoord.x / res.x - 1.0) * (res.x / res.y), Y = 2.0 * gl_FragCoord.y / res.y - 1.0;
   vec3 d = normalize(camW + halfH * (X * camR + Y * camU)), o = eye;
   float b = dot(o, d), c = dot(o, o) - 1.0, disc = b * b - c;
   float sq = sqrt(max(disc, 0.0)), t = -b - sq;
   if (!(t > 0.0)) t = -b + sq;
-  if (disc < 0.0 || !(t > 0.0)) { color = vec4(0.0, 0.0, 0.0, 1.0); return; }
+  if (disc < 0.0 || !(t > 0.0)) {
+    vec3 bg = envOn == 1 && mode == 0 ? envRadiance(d) : vec3(0.0);
+    color = vec4(srgb(bg * exp2(exposure)), 1.0); return; }
   vec3 n = o + t * d;
   vec3 tx = vec3(n.z, 0.0, -n.x); float tl = length(tx);
   tx = tl > 1e-6 ? tx / tl : vec3(1.0, 0.0, 0.0);
@@ -73,8 +96,14 @@ void main() {
   vec3 delta = lightPos - n; float d2 = dot(delta, delta); vec3 l = delta / sqrt(d2);
   vec3 w = lightI * (max(dot(n, l), 0.0) / d2);
   vec3 ul = vec3(dot(l, tx), dot(l, bx), dot(l, n)), vl = vec3(dot(-d, tx), dot(-d, bx), dot(-d, n));
-  vec3 ra = max(brdf(itemA, ul, vl), 0.0) * w, x = ra;
-  if (mode == 1) x = abs(ra - max(brdf(itemB, ul, vl), 0.0) * w) * gain;
+  vec3 ra = max(brdf(itemA, ul, vl), 0.0) * w;
+  if (envOn == 1) ra += envTerm(itemA, n, tx, bx, vl);
+  vec3 x = ra;
+  if (mode == 1) {
+    vec3 rb = max(brdf(itemB, ul, vl), 0.0) * w;
+    if (envOn == 1) rb += envTerm(itemB, n, tx, bx, vl);
+    x = abs(ra - rb) * gain;
+  }
   color = vec4(srgb(x * exp2(exposure)), 1.0);
 }`;
 
@@ -138,12 +167,27 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     });
   }
 
+  const ENV_UNIT = 14;
+  function uploadEnvironment() {
+    const env = DATA.environment, tex = gl.createTexture();
+    gl.activeTexture(gl.TEXTURE0 + ENV_UNIT);
+    gl.bindTexture(gl.TEXTURE_2D, tex);
+    const w = env ? env.width : 1, h = env ? env.height : 1, rgba = new Float32Array(4 * w * h);
+    if (env) { const rgb = new Float32Array(bytes(env.texels));
+      for (let i = 0; i < w * h; i++) rgba.set([rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2], 1], 4 * i); }
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, h, 0, gl.RGBA, gl.FLOAT, rgba);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  }
+
   function use(p, uniforms) {
     gl.useProgram(p);
     for (const [i, unit] of tables) {
       const loc = gl.getUniformLocation(p, "table_" + i);
       if (loc) gl.uniform1i(loc, unit);
     }
+    const envLoc = gl.getUniformLocation(p, "envTex");
+    if (envLoc) gl.uniform1i(envLoc, ENV_UNIT);
     for (const [name, val] of Object.entries(uniforms)) {
       const loc = gl.getUniformLocation(p, name);
       if (loc === null) continue;
@@ -205,7 +249,8 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
   const L0 = S.light, R = Math.hypot(L0[0], L0[1], L0[2]);
   const init = { azimuth: Math.atan2(L0[0], L0[2]) / DEG, elevation: Math.asin(L0[1] / R) / DEG };
   const state = view.state = { azimuth: init.azimuth, elevation: init.elevation, radius: R, exposure: S.exposure,
-                               gain: 4, incidence: 45, itemA: 0, itemB: -1, light: null };
+                               gain: 4, incidence: 45, itemA: 0, itemB: -1, light: null,
+                               environment: !!DATA.environment };
   const isFn = (k) => k >= 0 && ITEMS[k].kind !== "points";
 
   function lightPosition() {
@@ -232,6 +277,9 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     range("exposure", "exposure", (x) => x.toFixed(2), false);
     range("errorGain", "gain", (x) => String(x), false);
     range("incidence", "incidence", (x) => String(x), true);
+    const env = $("environment");
+    env.checked = state.environment; env.parentElement.hidden = !DATA.environment;
+    env.addEventListener("change", () => { state.environment = env.checked; schedule(); });
     $("resetLight").addEventListener("click", () => { state.azimuth = init.azimuth; state.elevation = init.elevation; schedule(); });
     let drag = null;
     ["sphereA", "sphereB", "sphereErr"].forEach((id) => {
@@ -264,6 +312,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     const n = S.size, light = lightPosition();
     state.light = { position: light, intensity: [S.intensity, S.intensity, S.intensity] };
     const common = Object.assign(camera(), { lightPos: light, lightI: state.light.intensity, exposure: state.exposure,
+                                             envOn: state.environment ? 1 : 0,
                                              gain: state.gain, itemA: Math.max(state.itemA, 0), itemB: Math.max(state.itemB, 0) });
     const both = isFn(state.itemA) && isFn(state.itemB) && state.itemB !== state.itemA;
     if (isFn(state.itemA)) drawTo("sphereA", progs.sphere, Object.assign({}, common, { mode: 0 }), n, n);
@@ -409,6 +458,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
 
   try {
     uploadTables();
+    uploadEnvironment();
     progs = { sphere: program(SPHERE), slice: program(SLICE), evaluate: program(EVAL) };
     if (!floatTargets) fail("This browser's WebGL2 cannot render to float textures (EXT_color_buffer_float): the plots are off.");
     setupControls();
