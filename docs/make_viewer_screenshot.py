@@ -13,8 +13,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import png  # noqa: E402
 from _browser import Browser, find_chromium  # noqa: E402
+from PIL import Image  # noqa: E402 - matplotlib's own image library
 
 import polyjax as pj  # noqa: E402
 
@@ -35,7 +35,7 @@ def main() -> int:
             image = browser.screenshot()
         finally:
             browser.close()
-    png.from_array(image.reshape(image.shape[0], -1), "RGB").save(str(out))
+    Image.fromarray(image).save(out, optimize=True)
     print(f"wrote {out}")
     return 0
 

@@ -122,14 +122,14 @@ class Browser:
 
     def screenshot(self, selector: str | None = None) -> np.ndarray:
         """A PNG screenshot of the viewport or of one element, as ``(H, W, 3)`` uint8."""
-        import png
+        import matplotlib.image
 
         params = {"format": "png"}
         if selector is not None:
             params["clip"] = dict(self.box(selector), scale=1)
         data = base64.b64decode(self.send("Page.captureScreenshot", params)["data"])
-        w, h, rows, _ = png.Reader(file=io.BytesIO(data)).asRGBA8()
-        return np.array(list(rows), np.uint8).reshape(h, w, 4)[..., :3]
+        image = matplotlib.image.imread(io.BytesIO(data), format="png")  # 8-bit PNG -> floats k / 255
+        return np.round(image[..., :3] * 255).astype(np.uint8)
 
     def mouse(self, kind: str, x: float, y: float, buttons: int = 1) -> None:
         self.send("Input.dispatchMouseEvent", {"type": kind, "x": x, "y": y, "button": "left", "buttons": buttons,

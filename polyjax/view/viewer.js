@@ -167,7 +167,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     });
   }
 
-  const ENV_UNIT = 14;
+  const ENV_UNIT = 14, INT_UNIFORMS = new Set(["itemA", "itemB", "mode", "envOn", "item", "uTex", "vTex"]);
   function uploadEnvironment() {
     const env = DATA.environment, tex = gl.createTexture();
     gl.activeTexture(gl.TEXTURE0 + ENV_UNIT);
@@ -191,7 +191,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     for (const [name, val] of Object.entries(uniforms)) {
       const loc = gl.getUniformLocation(p, name);
       if (loc === null) continue;
-      if (Number.isInteger(val) && name !== "exposure" && name !== "gain" && name !== "halfH") gl.uniform1i(loc, val);
+      if (INT_UNIFORMS.has(name)) gl.uniform1i(loc, val);
       else if (typeof val === "number") gl.uniform1f(loc, val);
       else if (val.length === 2) gl.uniform2fv(loc, val);
       else gl.uniform3fv(loc, val);
