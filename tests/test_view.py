@@ -12,6 +12,7 @@ import subprocess
 import sys
 import urllib.request
 
+import equinox as eqx
 import numpy as np
 import pytest
 from _browser import Browser, find_chromium
@@ -325,6 +326,8 @@ def test_models_without_an_expression_are_tabulated_on_the_merl_grid(model):
     u, v, _, above = pj.data.merl_grid((8, 8, 16))
     expected = np.where(above[:, None], np.asarray(pj.render.evaluate_rgb(ct, u, v)), 0.0)
     np.testing.assert_allclose(items[0].table.reshape(-1, 3), expected, rtol=1e-6, atol=1e-7)
+    failed = eqx.tree_at(lambda m: m.l2, model, np.full(model.l2.shape, np.nan))  # a failed fit: L2 NaN
+    assert "null" in pj.view.page_html(pj.view.as_items([failed]))
     with pytest.raises(pj.DataNotFoundError, match="no-such"):
         pj.view.as_items(["no-such.json"])
 

@@ -72,7 +72,9 @@ def _lanes(obj, what: str) -> list[tuple[str, object]]:
 
 
 def _array_list(a) -> list:
-    return np.round(np.asarray(a, np.float64), 8).ravel().tolist()
+    """Numbers for the page's JSON: rounded to 8 decimals, non-finite ones (a failed lane's L2) as None."""
+    a = np.round(np.asarray(a, np.float64), 8).ravel()
+    return [float(x) if np.isfinite(x) else None for x in a]
 
 
 def _polynomial_info(model: PolynomialBRDF) -> dict:
@@ -83,10 +85,16 @@ def _polynomial_info(model: PolynomialBRDF) -> dict:
 
 
 def _fit_info(model) -> dict:
-    names = list(getattr(model, "param_names", ()))
-    params = np.asarray(model.params, np.float64).reshape(-1, len(names) or np.shape(model.params)[-1])
-    info = {"model": getattr(model, "name", type(model).__name__), "parameters": names,
-            "values": [dict(zip(names, np.round(p, 8).tolist())) for p in params]}
+    """Name, parameter names and values (one row per lane) and L2 of a fitted model with ``params`` (a
+    ``baselines.BaselineFit``); the name alone when its parameters are not one numeric array."""
+    info = {"model": getattr(model, "name", type(model).__name__)}
+    try:
+        params = np.asarray(model.params, np.float64)
+    except (TypeError, ValueError):
+        return info
+    names = list(getattr(model, "param_names", ())) or [f"p{i}" for i in range(params.shape[-1] if params.ndim else 1)]
+    rows = params.reshape(-1, len(names))
+    info.update(parameters=names, values=[dict(zip(names, _array_list(p))) for p in rows])
     if hasattr(model, "l2"):
         info["L2"] = _array_list(model.l2)
     return info
