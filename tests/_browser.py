@@ -56,17 +56,17 @@ class Browser:
         self.ws = websocket.create_connection(f"ws://127.0.0.1:{port}{path}", timeout=timeout, suppress_origin=True)
         self._id = 0
         self.events: list[dict] = []
-        self.session = None
+        self.page_id = None
         target = self.send("Target.createTarget", {"url": "about:blank"})["targetId"]
-        self.session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        self.page_id = self.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
         for domain in ("Page", "Runtime", "Log", "Network"):
             self.send(f"{domain}.enable")
 
     def send(self, method: str, params: dict | None = None) -> dict:
         self._id += 1
         msg = {"id": self._id, "method": method, "params": params or {}}
-        if self.session is not None:
-            msg["sessionId"] = self.session
+        if self.page_id is not None:
+            msg["sessionId"] = self.page_id
         self.ws.send(json.dumps(msg))
         while True:
             reply = json.loads(self.ws.recv())
