@@ -22,7 +22,7 @@ import numpy as np
 FLAGS = ("--headless=new", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--enable-webgl",
          "--ignore-gpu-blocklist", "--no-first-run", "--no-default-browser-check", "--no-sandbox",
          "--disable-background-networking", "--disable-component-update", "--disable-extensions",
-         "--disable-sync", "--mute-audio", "--remote-debugging-port=0")
+         "--disable-sync", "--mute-audio", "--disable-dev-shm-usage", "--remote-debugging-port=0")
 
 
 def find_chromium() -> str | None:
