@@ -41,7 +41,8 @@ from ._variables import VariableSet, explanatory_variables, get_variables, regis
 
 __version__ = "0.1.0"
 
-_LAZY_SUBMODULES = ("export", "render", "svbrdf")  # imported on first use: they pull in far more than a fit needs
+# imported on first use: they pull in far more than a fit needs
+_LAZY_SUBMODULES = ("export", "render", "svbrdf", "view")
 
 
 def __getattr__(name):
@@ -70,5 +71,5 @@ __all__ = [
     "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
     "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
-    "THREADS_ENV", "lapack_threads", "one_lapack_thread",
+    "THREADS_ENV", "lapack_threads", "one_lapack_thread", "view",
 ]

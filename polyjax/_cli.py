@@ -226,6 +226,10 @@ def cmd_report(args) -> int:
     from ._cache import compile_notice
 
     with compile_notice("the report's fits", getattr(args, "cache_in_use", None)):
+        if getattr(args, "html", None):
+            from .view._cli import report_page
+
+            return report_page(args, _report)
         return _report(args)
 
 
@@ -308,6 +312,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     r = sub.add_parser("report", parents=[common],
                        help="fit the polynomial models of the paper's tables and report them (default)")
+    r.add_argument("--html", default=None, metavar="PAGE",
+                   help="also write the report with its fits as an interactive HTML page (polyjax view)")
     r.set_defaults(func=cmd_report)
 
     f = sub.add_parser("fit", parents=[common], help="fit a model to one dataset and print L2 and coefficients",
@@ -351,6 +357,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     from .svbrdf._cli import add_svbrdf_parser
 
     add_svbrdf_parser(sub, parents=[common])
+    from .view._cli import add_view_parser
+
+    add_view_parser(sub, parents=[common])
     return p
 
 
