@@ -33,7 +33,7 @@ def write_tensor_file(path, fields: dict) -> Path:
     return Path(path)
 
 
-def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, constant=False, res=(9, 12), s=6):
+def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, constant=False, res=(9, 12), s=5):
     """Fields of a small RGL-EPFL file: ``n_phi`` incident azimuths over ``phi_range`` (1: isotropic), 4 incident
     elevations, a ``res = (H, W)`` VNDF, ``s x s`` sample tables, 3 RGB channels or :data:`WAVELENGTHS`.
     ``constant``: a uniform VNDF (its warp is the identity), ``ndf = 2``, ``sigma = 0.25`` and channel ``c`` of the

@@ -124,8 +124,8 @@ def _sliced(table, pw, *index):
     :func:`_param_weights` (``((ip, wp), (it, wt))``): the sum over the 4 nodes."""
     (ip, wp), (it, wt) = pw
     out = 0.0
-    for a in range(2):
-        for b in range(2):
+    for a in range(1 if table.shape[0] == 1 else 2):  # one azimuth node (isotropic): its weight is 1
+        for b in range(1 if table.shape[1] == 1 else 2):
             val = table[(ip[a], it[b]) + tuple(index)]
             w = wp[a] * wt[b]
             out = out + w.reshape(w.shape + (1,) * (val.ndim - w.ndim)) * val
