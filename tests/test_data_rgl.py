@@ -164,3 +164,13 @@ def test_missing_file_and_bad_arguments(tmp_path):
         pj.data.load_rgl(path, subsample=-2)
     with pytest.raises(pj.InputError, match="subsample"):
         pj.data.load_rgl(path, subsample=10, directions=(U, V))
+
+
+def test_command_line_names_a_missing_rgl_file(tmp_path, capsys):
+    from polyjax._cli import main
+
+    missing = tmp_path / "nothing.bsdf"
+    assert main(["fit", "--dataset", f"rgl:{missing}"]) == 2
+    assert main(["export", str(missing), "--to", "merl", "--out", str(tmp_path / "x.binary")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("nothing.bsdf") >= 2 and not (tmp_path / "x.binary").exists()
