@@ -33,7 +33,8 @@ def write_tensor_file(path, fields: dict) -> Path:
     return Path(path)
 
 
-def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, constant=False, res=(9, 12), s=5):
+def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, constant=False, res=(9, 12), s=5,
+               jacobian=1, negative=False):
     """Fields of a small RGL-EPFL file: ``n_phi`` incident azimuths over ``phi_range`` (1: isotropic), 4 incident
     elevations, a ``res = (H, W)`` VNDF, ``s x s`` sample tables, 3 RGB channels or :data:`WAVELENGTHS`.
     ``constant``: a uniform VNDF (its warp is the identity), ``ndf = 2``, ``sigma = 0.25`` and channel ``c`` of the
@@ -51,6 +52,8 @@ def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, co
         ndf, sigma = np.full((max(n_phi, 2), 16), 2.0), np.full((max(n_phi, 2), 16), 0.25)
     else:
         vndf, vals = smooth(n_phi, n_t, h, w), 0.2 * smooth(n_phi, n_t, c, s, s)
+        if negative:
+            vals = np.where(rng.random(vals.shape) < 1 / 3, -vals, vals)
         ndf, sigma = smooth(max(n_phi, 2), 16), smooth(max(n_phi, 2), 16)
         if n_phi == 1:  # isotropic, as the database's files: the NDF's two azimuth rows equal, the tables
             # symmetric in the relative azimuth (Mitsuba leaves its azimuthal reduction unset for isotropic files, so
@@ -64,7 +67,7 @@ def rgl_fields(*, n_phi=1, phi_range=(-np.pi, np.pi), spectral=False, seed=0, co
     if spectral:
         fields["wavelengths"] = f32(WAVELENGTHS)
     fields["spectra" if spectral else "rgb"] = f32(vals)
-    fields["jacobian"] = np.array([1], np.uint8)
+    fields["jacobian"] = np.array([jacobian], np.uint8)
     fields["valid"] = np.ones(s * s, np.uint8)
     return fields
 

@@ -22,7 +22,7 @@ U, V = hemisphere(N, 1, 0.02), hemisphere(N, 2, 0.02)
 
 def _relative(ours, ref, floor=1e-3):
     big = np.abs(ref) > floor
-    assert big.sum() > 0.5 * ref.size
+    assert big.sum() > 0.3 * ref.size
     return np.max(np.abs(ours[big] - ref[big]) / np.abs(ref[big]))
 
 
@@ -44,6 +44,7 @@ LAYOUTS = {  # name: (rgl_fields options, Mitsuba variant, reduction)
     "anisotropic-half": ({"n_phi": 4, "phi_range": (-np.pi, 0.0)}, "scalar_rgb", 2),
     "anisotropic-quarter": ({"n_phi": 3, "phi_range": (-np.pi, -np.pi / 2)}, "scalar_rgb", 4),
     "spectral": ({"spectral": True}, "scalar_spectral", 1),
+    "no-jacobian-negative": ({"jacobian": 0, "negative": True}, "scalar_rgb", 1),  # flag off; RGB below 0 clipped
 }
 
 
@@ -54,12 +55,21 @@ def test_written_layouts_equal_to_mitsuba(layout, tmp_path):
     opts, variant, reduction = LAYOUTS[layout]
     path = write_tensor_file(tmp_path / f"{layout}.bsdf", rgl_fields(seed=3, **opts))
     brdf = pj.data.read_rgl(path)
-    assert brdf.reduction == reduction and brdf.isotropic == (layout in ("isotropic", "spectral"))
+    assert brdf.reduction == reduction and brdf.isotropic == (layout in ("isotropic", "spectral",
+                                                                           "no-jacobian-negative"))
+    assert brdf.jacobian == (layout != "no-jacobian-negative")
     m = pj.data.load_rgl(path, directions=(U, V))
     spectral = layout == "spectral"
     assert m.channels == (tuple(f"{w:g}nm" for w in WAVELENGTHS) if spectral else ("R", "G", "B"))
     ref = mitsuba_measured(path, U, V, variant, WAVELENGTHS if spectral else None)
-    assert _relative(np.asarray(m.values).T, ref) < 1e-5
+    if not spectral:  # the reference RGB code clips out-of-gamut values to 0; Mitsuba does not
+        assert (ref < 0).any() == (layout == "no-jacobian-negative")
+        ref = np.maximum(ref, 0.0)
+    assert np.all(np.asarray(m.values)[:, ~(ref.T > 0).any(0)] == 0.0) or spectral
+    # with signs mixed, small values are differences of larger ones, which Mitsuba rounds to float32: compared where
+    # they are above 0.05 (the typical value is 0.1-1; the others are checked to be 0 where Mitsuba's are <= 0)
+    floor, tol = (0.05, 1e-4) if layout == "no-jacobian-negative" else (1e-3, 1e-5)
+    assert _relative(np.asarray(m.values).T, ref, floor) < tol
 
 
 def test_closed_form_of_a_uniform_table(tmp_path):
