@@ -322,7 +322,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     f.add_argument("--sample", default="25", help="CUReT sample number or name (default 25, Quarry Tile)")
     f.add_argument("--dataset", default=None,
                    help="dataset spec instead of --sample, e.g. curet:1,25, merl-nbrdf:green-latex, cornell:cayman, "
-                   "merl:<file.binary>, nbrdf:<zip or folder>:<name>")
+                   "merl:<file.binary>, nbrdf:<zip or folder>:<name>, rgl:<file.bsdf>")
     f.add_argument("--model", default="polynomial",
                    help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
                    "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")

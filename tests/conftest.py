@@ -160,6 +160,7 @@ FILE_SECONDS = {"test_sampling.py": 64, "test_grad_fit.py": 60, "test_export.py"
     "test_cli_usability.py": 9, "test_data_merl.py": 8, "test_robust_symmetry.py": 7, "test_cli.py": 7,
     "test_fit_images_cli.py": 6, "test_inputs.py": 6, "test_render_image.py": 6, "test_data_cornell.py": 5,
     "test_architecture.py": 3}
+FILE_SECONDS["test_data_rgl.py"] = 38
 #: where a file not in the table (not measured yet) starts: as a file of this many seconds
 UNMEASURED_SECONDS = 20
 

@@ -61,6 +61,7 @@ from ._nbrdf import (
     nbrdf_names,
     resolve_merl_name,
 )
+from ._rgl import RGLBRDF, load_rgl, read_rgl, resolve_rgl_path
 from ._synthetic import synthetic_default
 from ._tabulate import tabulate
 
@@ -74,5 +75,5 @@ __all__ = [
     "directions_to_rusinkiewicz", "load_merl_binary", "merl_bin_angles", "merl_bin_weights", "merl_grid",
     "merl_index", "read_merl_binary", "rusinkiewicz_to_directions", "write_merl_binary", "NeuralBRDF",
     "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name",
-    "tabulate",
+    "tabulate", "RGLBRDF", "load_rgl", "read_rgl", "resolve_rgl_path",
 ]

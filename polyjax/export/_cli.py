@@ -47,6 +47,10 @@ def add_export_parser(sub, parents=()) -> argparse.ArgumentParser:
 def run_export(args) -> int:
     import polyjax as pj
 
+    from ._rgl import is_rgl_source
+
+    if is_rgl_source(args.model):
+        return _run_rgl_export(args)
     from ._glsl import brdf_explorer, glsl
     from ._merl import merl_binary
 
@@ -72,6 +76,21 @@ def run_export(args) -> int:
         out.write_text(_MITSUBA_SCRIPT.format(model=str(src.resolve()), index=args.index, name=args.name,
                                               stem=out.stem))
     print(f"wrote {out} ({args.to})")
+    return 0
+
+
+def _run_rgl_export(args) -> int:
+    """``polyjax export <file.bsdf or rgl:spec> --to merl``: an RGL-EPFL measured BSDF as a MERL ``.binary``."""
+    import polyjax as pj
+
+    from ._rgl import rgl_to_merl
+
+    if args.to != "merl":
+        raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl' only, found {args.to!r}")
+    name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
+    out = Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"])
+    rgl_to_merl(name, out, root=getattr(args, "data_root", None))
+    print(f"wrote {out} (merl, from the RGL-EPFL file {name})")
     return 0
 
 
