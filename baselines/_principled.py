@@ -89,7 +89,8 @@ def _material(name: str, names: tuple[str, ...]):
         p = np.asarray(params, float)
         out = {"model": "principled", "base_color": [float(x) for x in p[:, 0]]}
         out.update({n: float(p[0, i]) for i, n in enumerate(names[1:], start=1)})
-        return {"spec_tint": 0.0, "anisotropic": 0.0, **out}
+        out.setdefault("anisotropic", 0.0)
+        return dict(out, spec_tint=0.0)
 
     return to_material
 
