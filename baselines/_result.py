@@ -64,6 +64,13 @@ class BaselineFit(eqx.Module):
     def batch_shape(self) -> tuple[int, ...]:
         return tuple(self.l2.shape)
 
+    def material(self, index=()) -> dict:
+        """The fitted material ``index`` of a standard model, named as its specification names it
+        (:func:`baselines.standard_material`; what :func:`polyjax.export.gltf` and ``mitsuba_xml`` take)."""
+        from ._standard import standard_material
+
+        return standard_material(self, index)
+
     def __call__(self, u, v) -> Float[Array, "*batch n"]:
         """Evaluate every fitted lane at directions ``u, v`` ``(n, 3)``: returns ``(*batch, n)``.
 

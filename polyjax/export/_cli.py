@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._standard import TARGETS, add_standard_arguments, run_standard_export
+
 FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
 
 _MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of the polyjax model {model!r} (written by `polyjax export --to mitsuba`).
@@ -36,11 +38,12 @@ def add_export_parser(sub, parents=()) -> argparse.ArgumentParser:
     p = sub.add_parser("export", parents=list(parents),
                        help="write a saved model for Mitsuba 3, BRDF Explorer, GLSL or MERL tools")
     p.add_argument("model", help="a model written by `polyjax fit --save` (.npz or .json)")
-    p.add_argument("--to", required=True, choices=sorted(FORMATS), help="target format")
+    p.add_argument("--to", required=True, choices=sorted(FORMATS) + sorted(TARGETS), help="target format")
     p.add_argument("--out", default=None, help="output file (default: the model's name with the format's suffix)")
     p.add_argument("--index", type=int, default=None,
                    help="lane of a batched model (e.g. the material) when it holds more than one BRDF")
     p.add_argument("--name", default="polyjax", help="Mitsuba plugin name (--to mitsuba)")
+    add_standard_arguments(p)  # --to gltf, mitsuba-xml: a standard material fitted to a model or data set
     return p
 
 
@@ -54,6 +57,8 @@ def run_export(args) -> int:
     from ._glsl import brdf_explorer, glsl
     from ._merl import merl_binary
 
+    if args.to in TARGETS:
+        return run_standard_export(args)
     src = Path(args.model)
     model = pj.load_model(src)
     if args.index is not None:
