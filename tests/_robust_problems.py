@@ -7,6 +7,7 @@ import functools
 
 import jax.numpy as jnp
 import numpy as np
+from _standard_problems import STANDARD_PARAMS
 
 import baselines as bl
 import polyjax as pj
@@ -55,7 +56,7 @@ def baseline_params(name: str):
     """Known constrained parameters of a baseline model (a 55-term ramp for Zernike)."""
     if name == "zernike":
         return jnp.linspace(-1.0, 1.0, bl.n_zernike_terms(8))
-    return jnp.asarray(TRUE_PARAMS[name] if name in TRUE_PARAMS else PUBLISHED_LIKE[name])
+    return jnp.asarray({**TRUE_PARAMS, **PUBLISHED_LIKE, **STANDARD_PARAMS}[name])
 
 
 #: Parameters of the published compact models, typical of their MERL fits (``kap`` folded into ``rho_s``).
