@@ -6,7 +6,14 @@ GLSL computes them."""
 
 from __future__ import annotations
 
+import functools
+
+import jax.numpy as jnp
 import numpy as np
+
+import baselines as bl
+
+from _baseline_problems import synthetic_geometry
 
 #: Known constrained parameters (inside the ranges, away from the limits), one colour channel.
 STANDARD_PARAMS = {
@@ -18,6 +25,18 @@ STANDARD_PARAMS = {
     "usd-preview-clearcoat": [0.5, 0.3, 0.4, 1.6, 0.4, 0.15],
 }
 STANDARD_MODELS = tuple(STANDARD_PARAMS)
+
+
+@functools.cache
+def grey_fit(name: str):
+    """``(u, v, values (3, n), fit)``: the fit of noise-free R, G, B data of the grey material
+    ``STANDARD_PARAMS[name]`` (the same colour in the three channels), made once per process and model; every test
+    file asks with the same shapes and options, so the fit's program is compiled once."""
+    u, v = synthetic_geometry(300, seed=0)
+    m = bl.get_model(name)
+    y = m.evaluate(jnp.asarray(STANDARD_PARAMS[name]), u, v)
+    values = jnp.stack([y, y, y])
+    return u, v, values, bl.fit(name, u, v, values, n_starts=6, rtol=1e-10, atol=1e-12)
 
 EPS = 1e-8
 N = np.array([0.0, 0.0, 1.0])

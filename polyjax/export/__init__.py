@@ -2,8 +2,11 @@
 Mitsuba 3 BSDF plugin (``mitsuba_bsdf``, needs the optional ``mitsuba`` package)."""
 
 from ._glsl import brdf_explorer, glsl, numpy_function
+from ._materialx import materialx
 from ._merl import merl_binary, tabulate_merl
 from ._mitsuba import mitsuba_bsdf, register_mitsuba_bsdf
+from ._usd import usd
 
 __all__ = ["brdf_explorer", "glsl", "merl_binary", "mitsuba_bsdf", "numpy_function", "register_mitsuba_bsdf",
            "tabulate_merl"]
+__all__ += ["materialx", "usd"]
