@@ -52,7 +52,7 @@ USD_CASES = [
 def test_openpbr_matches_the_materialx_glsl_closures(pairs, case):
     u, v = pairs
     p = OPENPBR_CASES[case]
-    ours = np.asarray(open_pbr_surface({k: jnp.asarray(x) for k, x in p.items()}, u, v))
+    ours = np.asarray(jax.jit(open_pbr_surface)(p, u, v))
     np.testing.assert_allclose(ours, openpbr_reference(p, u, v), rtol=1e-10, atol=1e-12)
 
 
@@ -60,8 +60,9 @@ def test_openpbr_matches_the_materialx_glsl_closures(pairs, case):
 def test_usd_preview_matches_storms_preview_surface(pairs, case):
     u, v = pairs
     p = USD_CASES[case]
-    ours = np.asarray(usd_preview_surface({k: x if k == "useSpecularWorkflow" else jnp.asarray(x)
-                                           for k, x in p.items()}, u, v))
+    spec = {k: x for k, x in p.items() if k != "useSpecularWorkflow"}
+    ours = np.asarray(jax.jit(lambda q, u, v: usd_preview_surface(
+        dict(q, useSpecularWorkflow=p.get("useSpecularWorkflow", 0)), u, v))(spec, u, v))
     np.testing.assert_allclose(ours, usd_preview_reference(p, u, v), rtol=1e-10, atol=1e-12)
 
 
