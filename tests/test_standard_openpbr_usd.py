@@ -201,3 +201,20 @@ def test_bad_parameters_give_clear_errors():
             m.to_material(np.zeros((2, m.n_params)))
         with pytest.raises(pj.InputError, match="to_material: expected finite"):
             m.to_material(np.full((3, m.n_params), np.nan))
+
+
+@pytest.mark.slow  # a forward derivative of the fit compiled, and two more fits: about a minute on 2 loaded cores
+def test_fit_derivative_matches_finite_differences():
+    """The fit's implicit derivative (``jax.jvp`` of ``baselines.fit`` w.r.t. the values) against central
+    differences of refits, on the grey UsdPreviewSurface material."""
+    u, v, values, _ = grey_fit("usd-preview")
+    direction = values * jnp.linspace(0.5, 1.5, values.shape[-1]) * jnp.asarray([[1.0], [0.8], [1.2]])
+
+    def params(y):
+        return bl.fit("usd-preview", u, v, y, n_starts=6, rtol=1e-10, atol=1e-12).params
+
+    _, tangent = jax.jvp(params, (values,), (direction,))
+    h = 1e-4
+    fd = (params(values + h * direction) - params(values - h * direction)) / (2 * h)
+    np.testing.assert_allclose(tangent, fd, rtol=1e-4, atol=1e-6)
+    assert float(jnp.max(jnp.abs(tangent))) > 1e-2
