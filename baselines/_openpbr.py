@@ -109,10 +109,18 @@ def _with_coat(p: dict):
     """The specular roughness and IOR the coat leaves to the layers below it (``effective_specular_roughness``,
     ``eta_s``)."""
     cw, r, ior = p["coat_weight"], p["specular_roughness"], p["specular_ior"]
+    if _no_coat(cw):
+        return r, ior
     covered = jnp.minimum(1.0, 2.0 * p["coat_roughness"] ** 4 + r**4) ** 0.25
     ratio = ior / p["coat_ior"]
     ratio = jnp.where(ratio > 1.0, ratio, 1.0 / ratio)
     return r + (covered - r) * cw, ior + (ratio - ior) * cw
+
+
+def _no_coat(cw) -> bool:
+    """A coat weight known to be 0 when traced (a Python number): the coat's closures are left out, as MaterialX's
+    ``dielectric_bsdf`` returns at once for a weight below ``M_FLOAT_EPS``."""
+    return isinstance(cw, (int, float)) and cw < mx.EPS
 
 
 def _base_substrate(p: dict, d: _Dirs):
@@ -131,6 +139,8 @@ def _base_substrate(p: dict, d: _Dirs):
 def _coat(p: dict, d: _Dirs, base):
     """``coat_layer``: the coat lobe over the attenuated, darkened base (``coat_weight = 0``: ``base``)."""
     cw = p["coat_weight"]
+    if _no_coat(cw):
+        return base
     k = 1.0 - (1.0 - mx.ior_to_f0(p["coat_ior"])) / p["coat_ior"] ** 2
     e_base = p["base_color"] + (p["base_color"] * p["specular_weight"] - p["base_color"]) * p["base_metalness"]
     darkening = 1.0 + ((1.0 - k) / (1.0 - e_base * k) - 1.0) * cw * p["coat_darkening"]
