@@ -49,13 +49,14 @@ def main():
     ap.add_argument("--eval-bins", type=int, default=20000)
     ap.add_argument("--fit-bins", type=int, default=5000)
     ap.add_argument("--starts", type=int, default=16)
+    ap.add_argument("--models", default=",".join(MODELS), help="comma-separated baseline models to fit")
     args = ap.parse_args()
     names = args.materials.split(",")
     d = pj.data.load_merl_nbrdf(names, subsample=args.eval_bins, seed=0)
     dfit = pj.data.load_merl_nbrdf(names, subsample=args.fit_bins, seed=1)
     l2_best, lg_best = np.minimum(*[scores(d.values, published_predictions(k, names, d), d) for k in ("sgd", "abc")])
     rows = []
-    for name in MODELS:
+    for name in args.models.split(","):
         t0 = time.perf_counter()
         fit, t = _fit_twice(name, dfit, args.starts)
         first = time.perf_counter() - t0 - t
