@@ -110,7 +110,8 @@ def _hemisphere(n_theta=160, n_phi=160):
 WHITE_BOUND = {"openpbr": 1.085, "openpbr-coat": 1.08, "usd-preview": 1.175, "usd-preview-specular": 1.105}
 
 
-@pytest.mark.parametrize("name", list(WHITE_BOUND))
+@pytest.mark.parametrize("name", [pytest.param(k, marks=pytest.mark.slow) if k == "openpbr-coat" else k
+                                  for k in WHITE_BOUND])
 def test_albedo_at_most_one_on_a_grid_of_parameters(name):
     """Directional albedo ``int f cos`` on a grid of 24 random parameter sets, at views of 0, 30, 60 and 80 degrees:
     at most 1 for colours up to 0.8, and for white at normal view; white materials at oblique views stay under the
@@ -142,8 +143,8 @@ def test_albedo_at_most_one_on_a_grid_of_parameters(name):
 
 # the coat and anisotropic variants run every path of the OpenPBR graph, the clearcoat and specular ones every path
 # of UsdPreviewSurface
-@pytest.mark.parametrize("name", ["openpbr-coat", "openpbr-anisotropic", "usd-preview-clearcoat",
-                                  "usd-preview-specular"])
+@pytest.mark.parametrize("name", ["openpbr-coat", pytest.param("openpbr-anisotropic", marks=pytest.mark.slow),
+                                  "usd-preview-clearcoat", "usd-preview-specular"])
 def test_parameter_derivatives_match_finite_differences(pairs, name):
     u, v = pairs
     m = bl.get_model(name)
