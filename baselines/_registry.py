@@ -14,9 +14,11 @@ from . import (
     _gltf_pbr,
     _lafortune,
     _lafortune_anisotropic,
+    _openpbr,
     _oren_nayar,
     _principled,
     _sgd,
+    _usd_preview,
     _ward,
     _ward_anisotropic,
     _ward_duer,
@@ -42,6 +44,8 @@ _ALL = (
     _ashikhmin_shirley.MODEL, _blinn_phong.MODEL, _cook_torrance.MODEL, _lafortune.MODEL, _oren_nayar.MODEL,
     _ward.MODEL, _ward_duer.MODEL, ZERNIKE, _lafortune_anisotropic.MODEL, _ward_anisotropic.MODEL,
     _sgd.MODEL, _abc.MODEL,
+    _openpbr.MODEL, _openpbr.ANISOTROPIC, _openpbr.COAT, _usd_preview.MODEL, _usd_preview.SPECULAR,
+    _usd_preview.CLEARCOAT,
 )
 _ALL += (_gltf_pbr.MODEL, _gltf_pbr.SPECULAR, _gltf_pbr.ANISOTROPIC, _principled.MODEL, _principled.ANISOTROPIC)
 REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}

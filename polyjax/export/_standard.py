@@ -21,15 +21,17 @@ import numpy as np
 TARGETS: dict[str, tuple[str, str, str]] = {
     "gltf": ("gltf-pbr", "gltf", ".glb"),
     "mitsuba-xml": ("principled", "mitsuba_xml", ".xml"),
+    "openpbr": ("openpbr", "materialx", ".mtlx"),
+    "usd": ("usd-preview", "usd", ".usda"),
 }
 
 
 def add_standard_arguments(p) -> None:
     """The options of the standard targets, added to ``polyjax export``'s parser."""
     p.add_argument("--samples", type=int, default=20000,
-                   help="direction pairs a saved model is tabulated at (--to gltf, mitsuba-xml)")
+                   help="direction pairs a saved model is tabulated at (--to gltf, mitsuba-xml, openpbr, usd)")
     p.add_argument("--subsample", type=int, default=None,
-                   help="keep this many samples of a measured data set (--to gltf, mitsuba-xml)")
+                   help="keep this many samples of a measured data set (--to gltf, mitsuba-xml, openpbr, usd)")
 
 
 def _tabulated(model, n: int, seed: int = 0):
