@@ -7,12 +7,12 @@ import functools
 
 import jax.numpy as jnp
 import numpy as np
+from _standard_problems import STANDARD_PARAMS as OPENPBR_USD_PARAMS
 
 import baselines as bl
 import polyjax as pj
 
 from _baseline_problems import STANDARD_PARAMS, TRUE_PARAMS
-from _standard_problems import STANDARD_PARAMS as OPENPBR_USD_PARAMS
 from _problems import curet, random_hemisphere  # noqa: F401 - re-exported for the robustness modules
 
 #: Stated bound on L2(float32) / L2(float64) for the default Legendre basis up to p = 15
