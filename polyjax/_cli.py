@@ -68,6 +68,48 @@ def _lane_labels(data, lead: list[str] | None = None) -> list[str]:
     return [" ".join(parts) for parts in itertools.product(*per_axis)] or [""]
 
 
+def samples_used(data, cutoff) -> int:
+    """The fewest samples any lane of ``data`` keeps: inside the grazing cutoff (the rule of
+    :func:`polyjax.cutoff_mask`), valid in its mask, with a positive weight (numpy on the host: no program is compiled)."""
+    import numpy as np
+
+    u, v = np.asarray(data.u), np.asarray(data.v)
+    cu = u[..., 2] / np.maximum(np.linalg.norm(u, axis=-1), 1e-300)
+    cv = v[..., 2] / np.maximum(np.linalg.norm(v, axis=-1), 1e-300)
+    keep = (cu > 0) & (cv > 0)
+    if cutoff is not None:  # the rule of pj.cutoff_mask, tolerance included
+        c = np.cos(np.radians(float(cutoff))) - 1e-9
+        keep = keep & (cu >= c) & (cv >= c)
+    if data.mask is not None:
+        keep = keep & np.asarray(data.mask)
+    if data.weights is not None:
+        keep = keep & (np.asarray(data.weights) > 0)
+    keep = keep.reshape(-1, keep.shape[-1])
+    return int(keep.sum(axis=-1).min())
+
+
+def check_degrees_fit(data, variables, degrees, interactions, cutoff, flag: str) -> None:
+    """Refuse, before any work, a degree whose polynomial has more parameters than the samples a fit uses (an
+    interpolation, not a model: the command line never asks for one).
+
+    Raises:
+        InputError: naming ``flag``, the parameters and the samples used.
+    """
+    from ._basis import n_terms
+    from ._errors import InputError
+    from ._variables import get_variables
+
+    vs = get_variables(variables)
+    n = samples_used(data, cutoff)
+    for p in degrees:
+        m = n_terms(vs.k, int(p), bool(interactions))
+        if m > n:
+            ok = [q for q in range(int(p), -1, -1) if n_terms(vs.k, q, bool(interactions)) <= n]
+            hint = f"; degree {ok[0]} or lower fits" if ok else ""
+            raise InputError(f"{flag} {p}: expected at most as many parameters as the {n} samples used (inside "
+                             f"the {cutoff} degree cutoff), found {m} parameters ({vs.name} variables{hint})")
+
+
 #: a fit whose L2 is above this fraction of the L2 of f = 0 is reported as barely better than no model
 ZERO_MODEL_RATIO = 0.95
 
@@ -79,21 +121,23 @@ def cmd_fit(args) -> int:
     import polyjax as pj
 
     from ._kinds import fitter_for
-    from ._outputs import check_output_file
+    from ._outputs import check_model_file, strict_json
 
     degrees = _parse_degrees(args.degree)
     degree = degrees[0] if len(degrees) == 1 else degrees
     polynomial = args.model.strip().lower() == "polynomial"
     kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
     if args.save:
-        check_output_file(args.save, "--save")
+        check_model_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
+    if polynomial:
+        check_degrees_fit(data, args.variables, degrees, args.interactions, args.cutoff, "--degree")
     model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, degree)
-    if args.save:
-        pj.save_model(args.save, model)
     out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed)
+    if args.save:
+        out["saved"] = str(pj.save_model(args.save, model))
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
         return 0
     if synthetic:
         print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
@@ -219,6 +263,8 @@ def _print_fit(args, out: dict, model, beta) -> None:
     for w in out["warnings"]:
         print(f"WARNING: {w}")
     print(f"fit time (including compilation): {out['seconds']:.3f} s")
+    if out.get("saved"):
+        print(f"model written to {out['saved']}")
 
 
 def cmd_report(args) -> int:

@@ -117,7 +117,19 @@ def unpack(caller: str, u, v, values, weights, mask):
         mask = data.mask if mask is None else mask
     if v is None or values is None:
         raise InputError(f"{caller}: expected u, v and values (or a polyjax.Measurements)")
-    return u, v, values, weights, mask
+    return tuple(_as_array(name, a) for name, a in
+                 (("u", u), ("v", v), ("values", values), ("weights", weights), ("mask", mask)))
+
+
+def _as_array(name: str, a):
+    """Python lists and tuples (of numbers, nested) as numpy arrays; arrays and scalars unchanged."""
+    if not isinstance(a, (list, tuple)):
+        return a
+    try:
+        return np.asarray(a)
+    except ValueError as e:  # ragged nesting
+        raise InputError(f"{name}: expected an array or a nested list of numbers of one shape, found a ragged "
+                         f"list ({e})") from None
 
 
 def fit_dtype(values) -> jnp.dtype:
@@ -381,13 +393,19 @@ def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfi
 MAX_DESIGN_BYTES = 4 * 2**30
 
 
+#: parameters per sample above which a model is refused up front (below it, more parameters than samples is a
+#: minimum-norm interpolation flagged ``RANK_DEFICIENT``; the command line refuses any more than the samples used)
+MAX_PARAMS_PER_SAMPLE = 4
+
+
 def check_parameter_count(what: str, n_params: int, n: int, itemsize: int = 8) -> None:
-    """Refuse absurd models before any work: more than ``max(8 n, 1000)`` parameters for ``n`` samples, or a
+    """Refuse absurd models before any work: more than ``max(4 n, 64)`` parameters for ``n`` samples, or a
     design (``n x n_params``) over :data:`MAX_DESIGN_BYTES`. ``what`` names the arguments that set the count."""
-    limit = max(8 * n, 1000)
+    limit = max(MAX_PARAMS_PER_SAMPLE * n, 64)
     size = n * n_params * itemsize
     if n_params > limit or size > MAX_DESIGN_BYTES:
         raise InputError(
-            f"{what}: expected at most {limit} parameters for {n} samples (8 per sample, at least 1000) and a "
+            f"{what}: expected at most {limit} parameters for {n} samples ({MAX_PARAMS_PER_SAMPLE} per sample, at "
+            f"least 64) and a "
             f"design under {MAX_DESIGN_BYTES / 2**30:.0f} GiB, found {n_params} parameters ({size / 2**30:.3g} GiB)"
         )

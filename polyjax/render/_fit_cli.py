@@ -82,11 +82,14 @@ def load_scene_json(path: str | Path):
             raise InputError(f"{path}: images[{i}]: file {f} not found")
         images.append(read_exr(f))
     cam_spec = dict(_field(spec, "camera", str(path), required=True))
+    for key in ("fov_deg", "width", "height", "ortho_height"):
+        if key in cam_spec and (isinstance(cam_spec[key], bool) or not isinstance(cam_spec[key], (int, float))):
+            raise InputError(f"{path}: camera.{key}: expected a number, found {cam_spec[key]!r}")
     cam_spec.setdefault("height", images[0].shape[0])
     cam_spec.setdefault("width", images[0].shape[1])
     try:
         camera = Camera(**cam_spec)
-    except TypeError as e:
+    except (TypeError, ValueError) as e:
         raise InputError(f"{path}: camera: {e}") from None
     placeholder = Lambertian(0.5)
     objects = []
@@ -100,7 +103,7 @@ def load_scene_json(path: str | Path):
                 objects.append(Plane(placeholder, **args))
             else:
                 raise InputError(f"{path}: objects[{i}]: expected type 'sphere' or 'plane', found {kind!r}")
-        except TypeError as e:
+        except (TypeError, ValueError) as e:
             raise InputError(f"{path}: objects[{i}]: {e}") from None
     scenes = []
     for i, e in enumerate(entries):
@@ -119,7 +122,7 @@ def load_scene_json(path: str | Path):
                                               float(args.get("scale", 1.0))))
                 else:
                     raise InputError(f"{where}: expected type 'point', 'directional' or 'environment', found {kind!r}")
-            except TypeError as err:
+            except (TypeError, ValueError) as err:
                 raise InputError(f"{where}: {err}") from None
         scenes.append(Scene(camera, objects, lights))
     return scenes, images, int(spec.get("target", 0))
@@ -131,6 +134,10 @@ def run_fit_images(args) -> int:
 
     import polyjax as pj
 
+    from .._outputs import check_model_file, strict_json
+
+    if args.save:
+        check_model_file(args.save, "--save")  # before any work
     scenes, images, target = load_scene_json(args.scene)
     model = pj.fit_polynomial_to_images(
         scenes, images, variables=args.variables, degree=args.degree, target=target, saturation=args.saturation,
@@ -146,7 +153,7 @@ def run_fit_images(args) -> int:
         pj.save_model(args.save, model)
         out["saved"] = str(args.save)
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         print(f"fit-images: {out['images']} images, {out['pixels_used']} pixels used, {args.variables} p={args.degree}")
         print("  RMS radiance residual (R, G, B): " + ", ".join(f"{x:.4g}" for x in out["rms_residual_rgb"]))

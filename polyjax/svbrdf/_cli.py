@@ -69,6 +69,7 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
 
 def run_svbrdf(args) -> int:
     from .._errors import InputError
+    from .._outputs import check_output_dir, strict_json
     from . import _distributed
     from ._shards import FORMATS
 
@@ -77,6 +78,11 @@ def run_svbrdf(args) -> int:
     formats = tuple(f.strip() for f in args.format.split(","))
     if not all(f in FORMATS for f in formats) or len(set(formats)) != len(formats):
         raise InputError(f"--format: expected npz, exr or npz,exr, found {args.format!r}")
+    if args.lights < 1:
+        raise InputError(f"--lights: expected at least one light, found {args.lights}")
+    if args.size < 1:
+        raise InputError(f"--size: expected at least one texel per side, found {args.size}")
+    check_output_dir(args.out, "--out")  # the one rule of every command: its parent folder must exist
     _distributed.initialize(args.coordinator, args.num_processes, args.process_id)  # before any JAX computation
     import jax
     import jax.numpy as jnp
@@ -123,7 +129,7 @@ def run_svbrdf(args) -> int:
                    not_ok_local=int(status), manifest=str(manifest), materials=names)
     if jax.process_index() == 0:
         if args.json:
-            print(json.dumps(summary))
+            print(strict_json(summary))
         else:
             print(f"{summary['texels']} texels ({', '.join(names)}), {summary['processes']} process(es), "
                   f"{summary['devices']} device(s): fitted in {t_fit:.2f} s ({summary['texels_per_second']:.0f} "

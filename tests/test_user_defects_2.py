@@ -1,0 +1,198 @@
+"""What a new user ran into, second round: one test per case (output paths, corrupt model files, absurd degrees,
+strict JSON, model file suffixes, baseline exports and lane selection, lists as inputs, traced input rules, ...)."""
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import baselines as bl
+import polyjax as pj
+from polyjax._cli import main
+
+from _problems import random_hemisphere
+
+
+@pytest.fixture(scope="module")
+def problem():
+    u, v = random_hemisphere(205, seed=3)
+    return u, v, 0.1 + u[:, 2] * v[:, 2] + 0.2 * u[:, 0] * v[:, 0]
+
+
+@pytest.fixture(scope="module")
+def saved_fits(tmp_path_factory, problem):
+    """A polynomial fit of two degrees x two materials and a Ward fit of two materials on 40 samples, saved."""
+    u, v, b = problem
+    folder = tmp_path_factory.mktemp("fits")
+    poly = pj.fit_polynomial(u, v, np.stack([b, 0.5 * b + 0.05]), degree=[2, 3])
+    ward = bl.fit("ward", u[:40], v[:40], np.stack([b[:40], 0.5 * b[:40] + 0.05]), n_starts=2)
+    return pj.save_model(folder / "poly.npz", poly), pj.save_model(folder / "ward.json", ward), ward, poly
+
+
+@pytest.fixture()
+def no_data(monkeypatch):
+    monkeypatch.delenv(pj.DATA_ENV, raising=False)
+
+
+def _one_error_line(capsys, *words):
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("polyjax: error:"), err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    return lines[0]
+
+
+# ---------------------------------------------------------------- 3: output paths checked before any work, one rule
+def test_export_out_in_missing_folder_is_refused_before_reading_the_model(capsys, tmp_path):
+    missing_model = tmp_path / "not_read.npz"  # never read: the output path is checked first
+    assert main(["export", str(missing_model), "--to", "glsl", "--out", str(tmp_path / "nonexistent" / "x.glsl")]) == 2
+    _one_error_line(capsys, "--out", "nonexistent")
+
+
+def test_fit_images_save_in_missing_folder_is_refused_before_the_scene_is_read(capsys, tmp_path):
+    assert main(["fit-images", str(tmp_path / "no_scene.json"), "--save", str(tmp_path / "nonexistent" / "x.npz")]) == 2
+    _one_error_line(capsys, "--save", "nonexistent")
+
+
+def test_svbrdf_out_with_missing_parent_is_refused_not_created(capsys, tmp_path):
+    target = tmp_path / "nonexistent" / "dir"
+    assert main(["svbrdf", "--size", "2", "--lights", "4", "--out", str(target)]) == 2
+    _one_error_line(capsys, "--out", "nonexistent")
+    assert not (tmp_path / "nonexistent").exists()
+
+
+# ---------------------------------------------------------------- 4: corrupt model file
+def test_truncated_npz_model_is_a_data_format_error_naming_the_file(capsys, tmp_path, saved_fits):
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(saved_fits[0].read_bytes()[:1000])
+    with pytest.raises(pj.DataFormatError, match="cut.npz"):
+        pj.load_model(cut)
+    assert main(["export", str(cut), "--to", "glsl", "--out", str(tmp_path / "x.glsl")]) == 2
+    _one_error_line(capsys, "cut.npz")
+
+
+# ---------------------------------------------------------------- 5: absurd degree refused at once
+def test_fit_degree_500_is_refused_before_the_fit(capsys, no_data):
+    assert main(["fit", "--degree", "500"]) == 2  # 1001 parameters, 302 samples used (synthetic set)
+    _one_error_line(capsys, "--degree 500", "1001 parameters", "302 samples used")
+
+
+def test_render_degrees_500_is_refused_before_the_fit(capsys, no_data, tmp_path):
+    assert main(["render", "--degrees", "3,500", "--size", "4", "--out", str(tmp_path / "r")]) == 2
+    _one_error_line(capsys, "--degrees 500")
+
+
+def test_fit_polynomial_degree_500_on_205_samples_is_refused_in_the_api(problem):
+    u, v, b = problem
+    with pytest.raises(pj.InputError, match=r"degree=500.*expected at most 820 parameters for 205 samples"):
+        pj.fit_polynomial(u, v, b, degree=500)
+
+
+# ---------------------------------------------------------------- 6: strict JSON
+def test_fit_json_of_a_rank_deficient_fit_is_strict_json(capsys, no_data):
+    # monomials of degree 40 on 302 samples: numerically rank-deficient, condition inf
+    assert main(["fit", "--degree", "40", "--basis", "monomial", "--json"]) == 0
+    text = capsys.readouterr().out
+    rec = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
+    assert "Infinity" not in text and "NaN" not in text
+    assert rec["condition"] == [None, None, None] and rec["rank"] == [69, 69, 69]
+
+
+# ---------------------------------------------------------------- 8: model file suffixes
+def test_save_model_with_foreign_suffix_is_refused_not_renamed(tmp_path, saved_fits):
+    model = pj.load_model(saved_fits[0])
+    with pytest.raises(pj.InputError, match=r"\.npz or \.json.*'\.txt'"):
+        pj.save_model(tmp_path / "m.txt", model)
+    assert not list(tmp_path.iterdir())
+
+
+def test_fit_save_with_foreign_suffix_is_refused_before_the_fit(capsys, no_data, tmp_path):
+    assert main(["fit", "--degree", "2", "--save", str(tmp_path / "m.txt")]) == 2
+    _one_error_line(capsys, "--save", ".npz or .json")
+    assert not list(tmp_path.iterdir())
+
+
+def test_fit_save_prints_the_written_line(capsys, no_data, tmp_path):
+    assert main(["fit", "--degree", "2", "--save", str(tmp_path / "m.npz")]) == 0
+    assert f"model written to {tmp_path / 'm.npz'}" in capsys.readouterr().out
+    assert pj.load_model(tmp_path / "m.npz").batch_shape == (3,)
+
+
+# ---------------------------------------------------------------- 1, 2: baseline exports, lane selection
+def test_baseline_fit_evaluates_any_leading_direction_shape(saved_fits, problem):
+    ward = saved_fits[2]
+    u, v, _ = problem
+    flat = np.asarray(ward(u[:12], v[:12]))
+    grid = np.asarray(ward(u[:12].reshape(3, 4, 3), v[:12].reshape(3, 4, 3)))
+    assert grid.shape == (2, 3, 4)
+    np.testing.assert_array_equal(grid.reshape(2, 12), flat)
+    np.testing.assert_array_equal(np.asarray(ward[1](u[:12], v[:12])), flat[1])
+
+
+def test_export_baseline_fit_to_merl_selects_a_lane_and_tabulates_it(tmp_path, saved_fits):
+    ward = pj.load_model(saved_fits[1])[1]
+    out = pj.export.merl_binary(ward, tmp_path / "ward.binary", resolution=(6, 6, 12))
+    back = pj.data.load_merl_binary(out)
+    keep = np.all(np.broadcast_to(np.asarray(back.mask), np.shape(back.values)), axis=0)  # (n,) bins with a value
+    u, v = np.asarray(back.u)[keep], np.asarray(back.v)[keep]
+    got = np.asarray(back.values)[:, keep]  # (3 channels, bins)
+    assert got.shape[1] > 50
+    np.testing.assert_allclose(got, np.broadcast_to(np.maximum(np.asarray(ward(u, v)), 0), got.shape), rtol=1e-6)
+
+
+def test_export_baseline_fit_to_mitsuba_script(capsys, tmp_path, saved_fits):
+    out = tmp_path / "ward_plugin.py"
+    assert main(["export", str(saved_fits[1]), "--to", "mitsuba", "--index", "0", "--out", str(out)]) == 0
+    assert "INDEX = (0,)" in out.read_text()
+
+
+def test_export_index_selects_degree_then_material(capsys, tmp_path, saved_fits):
+    src = saved_fits[0]  # batch shape (2 degrees, 2 materials)
+    a, b = tmp_path / "a.glsl", tmp_path / "b.glsl"
+    assert main(["export", str(src), "--to", "glsl", "--index", "1,0", "--out", str(a)]) == 0
+    assert main(["export", str(src), "--to", "glsl", "--index", "1", "--index", "0", "--out", str(b)]) == 0
+    assert a.read_text() == b.read_text() == pj.export.glsl(pj.load_model(src)[1, 0])
+    assert main(["export", str(src), "--to", "glsl", "--index", "1", "--out", str(a)]) == 2
+    line = _one_error_line(capsys, "--index")
+    assert "model[i]" not in line
+
+
+# ---------------------------------------------------------------- 14: lists as inputs
+def test_fit_polynomial_accepts_python_lists(problem, saved_fits):
+    u, v, b = problem
+    a = pj.fit_polynomial(u.tolist(), v.tolist(), [b.tolist(), (0.5 * b + 0.05).tolist()], degree=[2, 3])
+    np.testing.assert_array_equal(np.asarray(a.coefficients), np.asarray(saved_fits[3].coefficients))
+
+
+def test_baselines_fit_accepts_python_lists(problem, saved_fits):
+    u, v, b = problem
+    values = [b[:40].tolist(), (0.5 * b[:40] + 0.05).tolist()]
+    a = bl.fit("ward", u[:40].tolist(), v[:40].tolist(), values, n_starts=2)
+    np.testing.assert_array_equal(np.asarray(a.params), np.asarray(saved_fits[2].params))
+
+
+def test_ragged_list_is_an_input_error_naming_the_argument(problem):
+    u, v, b = problem
+    with pytest.raises(pj.InputError, match="values: expected an array or a nested list"):
+        pj.fit_polynomial(u[:2], v[:2], [[0.1, 0.2], [0.3]], degree=1)
+
+
+# ---------------------------------------------------------------- 7: the "compiling" line only when compiling
+def test_compile_notice_is_quiet_while_the_cache_reads_programs_it_holds(monkeypatch):
+    import io
+    import time
+    from pathlib import Path
+
+    import polyjax._cache as cache_mod
+
+    monkeypatch.setattr(cache_mod.compile_notice, "printed", False)
+    # a warm run loading a large program: a look-up not yet answered, and no miss (nothing is compiled)
+    monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3, "misses": 0})
+    quiet = io.StringIO()
+    with cache_mod.compile_notice("the fit", Path("cache"), delay=0.0, stream=quiet):
+        time.sleep(0.3)
+    assert quiet.getvalue() == ""
