@@ -85,7 +85,7 @@ class BaselineFit(eqx.Module):
         if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
             raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
         try:
-            shape = jnp.broadcast_shapes(u.shape, v.shape)
+            jnp.broadcast_shapes(u.shape, v.shape)
         except ValueError:
             raise InputError(f"u and v: expected shapes that broadcast together, found {u.shape} and "
                              f"{v.shape}") from None

@@ -6,7 +6,6 @@ The paper's reproduction is a script of the repository, not a command: ``python 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
@@ -70,7 +69,7 @@ def _lane_labels(data, lead: list[str] | None = None) -> list[str]:
 
 def samples_used(data, cutoff) -> int:
     """The fewest samples any lane of ``data`` keeps: inside the grazing cutoff (the rule of
-    :func:`polyjax.cutoff_mask`), valid in its mask, with a positive weight (numpy on the host: no program is compiled)."""
+    :func:`polyjax.cutoff_mask`), valid in its mask, with a positive weight (numpy on the host: nothing compiled)."""
     import numpy as np
 
     u, v = np.asarray(data.u), np.asarray(data.v)

@@ -2,10 +2,7 @@
 strict JSON, model file suffixes, baseline exports and lane selection, lists as inputs, traced input rules, ...)."""
 
 import json
-import math
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 

@@ -4,7 +4,6 @@ light; on one process or several (``--num-processes``, ``--process-id``, ``--coo
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 
