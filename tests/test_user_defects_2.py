@@ -3,6 +3,8 @@ strict JSON, model file suffixes, baseline exports and lane selection, lists as 
 
 import json
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -193,3 +195,26 @@ def test_compile_notice_is_quiet_while_the_cache_reads_programs_it_holds(monkeyp
     with cache_mod.compile_notice("the fit", Path("cache"), delay=0.0, stream=quiet):
         time.sleep(0.3)
     assert quiet.getvalue() == ""
+
+
+# ---------------------------------------------------------------- 9: one rule eager and traced
+def test_grad_of_a_fit_with_nan_values_raises_the_eager_input_error(problem):
+    u, v, b = problem
+    y = np.array(b)
+    y[7] = np.nan
+    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 1 NaN/inf \(first at index \(7,\)"):
+        jax.grad(lambda y: pj.fit_polynomial(u, v, y, degree=2).l2)(jnp.asarray(y))
+    with pytest.raises(pj.InputError, match=r"found 1 NaN/inf \(first at index \(7,\)"):
+        pj.fit_polynomial(u, v, y, degree=2)
+
+
+def test_negative_weights_refused_eagerly_and_flagged_under_jit_never_clipped(problem):
+    u, v, b = problem
+    w = np.ones(205)
+    w[3] = -1.0
+    with pytest.raises(pj.InputError, match="weights: expected finite, non-negative"):
+        pj.fit_polynomial(u, v, b, weights=w, degree=2)
+    m = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.asarray(w))
+    assert int(m.status) == pj.Result.NONFINITE and np.isinf(float(m.l2))
+    ok = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.ones(205))
+    assert int(ok.status) == pj.Result.OK and np.isfinite(float(ok.l2))
