@@ -162,7 +162,9 @@ def _run_fit(args, data, kind, model_name, degree):
         if kind is None:
             options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
                            cutoff_deg=args.cutoff)
-            saved = fit_saved(data, cache, **options)
+            link = getattr(args, "link", "identity")
+            saved = fit_saved(data, cache, **options) if link == "identity" else None
+            options.update({} if link == "identity" else dict(link=link))
             model, zero = saved if saved is not None else (pj.fit_polynomial(data, **options), None)
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
@@ -210,6 +212,8 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
         "seconds": elapsed,
         "warnings": warnings_,
     }
+    if polynomial and getattr(model, "link", "identity") != "identity":
+        out["link"] = model.link
     if polynomial:
         out["rank"] = np.asarray(model.rank).tolist()
         out["condition"] = np.asarray(model.condition).tolist()
@@ -250,7 +254,7 @@ def _print_fit(args, out: dict, model, beta) -> None:
     if polynomial:
         counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
         print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
-              f"basis={args.basis}")
+              f"basis={args.basis}" + (f", link={out['link']}" if "link" in out else ""))
     else:
         print(f"model: {out['model']}, {n_params} parameters ({', '.join(model.param_names)})")
     flat_beta = beta.reshape(-1, beta.shape[-1])
@@ -313,6 +317,10 @@ def _report(args) -> int:
     return 0
 
 
+#: the built-in variable sets (pj.variable_sets() without importing JAX to print --help)
+BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley", "rusinkiewicz",
+                     "rusinkiewicz-phid")
+
 #: commands defined in this file: parsing them needs none of the other commands' modules (render, export, svbrdf)
 _CORE_COMMANDS = ("fit", "report")
 
@@ -366,7 +374,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                    help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
                    "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")
     f.add_argument("--variables", default="lafortune",
-                   help="ward | ashikhmin-shirley | lafortune | lafortune-anisotropic")
+                   help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES) + " (default lafortune)")
+    f.add_argument("--link", default="identity", choices=["identity", "log"],
+                   help="identity (default: the closed-form fit of equation (3)) or log: f = exp(P) - eps, fitted by "
+                   "a few Gauss-Newton solves (pj.fit_polynomial(..., link='log'))")
     f.add_argument("--degree", "--degrees", dest="degree", default="7",
                    help="polynomial degree p, or comma-separated degrees fitted in one batch (e.g. 2,3,5); default 7")
     f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"],

@@ -59,7 +59,7 @@ def test_fit_images_save_in_missing_folder_is_refused_before_the_scene_is_read(c
 
 def test_svbrdf_out_with_missing_parent_is_refused_not_created(capsys, tmp_path):
     target = tmp_path / "nonexistent" / "dir"
-    assert main(["svbrdf", "--size", "2", "--lights", "4", "--out", str(target)]) == 2
+    assert main(["svbrdf", "--size", "2", "--lights", "8", "--out", str(target)]) == 2
     _one_error_line(capsys, "--out", "nonexistent")
     assert not (tmp_path / "nonexistent").exists()
 
@@ -202,7 +202,7 @@ def test_grad_of_a_fit_with_nan_values_raises_the_eager_input_error(problem):
     u, v, b = problem
     y = np.array(b)
     y[7] = np.nan
-    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 1 NaN/inf \(first at index \(7,\)"):
+    with pytest.raises(pj.InputError, match=r"values: expected finite numbers, found 1 NaN/inf \(first at index \(7"):
         jax.grad(lambda y: pj.fit_polynomial(u, v, y, degree=2).l2)(jnp.asarray(y))
     with pytest.raises(pj.InputError, match=r"found 1 NaN/inf \(first at index \(7,\)"):
         pj.fit_polynomial(u, v, y, degree=2)
@@ -218,3 +218,37 @@ def test_negative_weights_refused_eagerly_and_flagged_under_jit_never_clipped(pr
     assert int(m.status) == pj.Result.NONFINITE and np.isinf(float(m.l2))
     ok = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.ones(205))
     assert int(ok.status) == pj.Result.OK and np.isfinite(float(ok.l2))
+
+
+# ---------------------------------------------------------------- 12: every variable set in --help, a --link flag
+def test_fit_help_lists_every_variable_set_and_a_link_flag(monkeypatch):
+    from polyjax._cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", "2000")  # one line per option: names are not wrapped at their hyphens
+    sub = build_parser("fit")._subparsers._group_actions[0].choices["fit"]
+    text = sub.format_help().replace("\n", " ")
+    text = " ".join(text.split())
+    for name in pj.variable_sets():
+        assert name in text, name
+    assert "--link {identity,log}" in text
+
+
+def test_fit_link_log_on_the_command_line_is_the_api_log_fit(capsys, no_data):
+    assert main(["fit", "--degree", "2", "--link", "log", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    api = pj.fit_polynomial(pj.data.synthetic_default(), variables="lafortune", degree=2, link="log")
+    assert rec["link"] == "log"
+    np.testing.assert_allclose(rec["l2"], np.asarray(api.l2), rtol=1e-12)
+
+
+# ---------------------------------------------------------------- 13: svbrdf arguments
+def test_svbrdf_degree_beyond_the_samples_of_a_texel_is_refused_at_once(capsys, tmp_path):
+    assert main(["svbrdf", "--size", "8", "--degree", "9", "--lights", "8", "--out", str(tmp_path / "t")]) == 2
+    _one_error_line(capsys, "--degree 9", "19 parameters", "--lights 8")
+    assert not (tmp_path / "t").exists()
+
+
+def test_svbrdf_zero_lights_names_the_flag(capsys, tmp_path):
+    assert main(["svbrdf", "--lights", "0", "--out", str(tmp_path / "t")]) == 2
+    line = _one_error_line(capsys, "--lights")
+    assert " k" not in line.split("error:")[1]
