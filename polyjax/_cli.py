@@ -194,6 +194,8 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
               for c in np.asarray(model.status).ravel()]
     labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
     zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff, zero)
+    if polynomial:
+        warnings_ += _condition_warning(np.asarray(model.condition), np.asarray(model.status), labels)
     out = {
         "source": data.source,
         "synthetic": synthetic,
@@ -218,6 +220,24 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
         out["rank"] = np.asarray(model.rank).tolist()
         out["condition"] = np.asarray(model.condition).tolist()
     return out, beta
+
+
+#: a full-rank fit whose weighted design has a condition number above this is reported as ill-conditioned
+ILL_CONDITIONED = 1e7
+
+
+def _condition_warning(cond, status, labels) -> list[str]:
+    """A warning naming the full-rank lanes whose condition number exceeds :data:`ILL_CONDITIONED`: the samples
+    barely determine that many parameters (a property of the samples, the same in either basis)."""
+    import numpy as np
+
+    high = (status.ravel() == 0) & np.isfinite(cond.ravel()) & (cond.ravel() > ILL_CONDITIONED)
+    if not high.any():
+        return []
+    lanes = [f"{labels[i]} ({c:.3g})" for i, (c, h) in enumerate(zip(cond.ravel(), high)) if h]
+    return [f"{len(lanes)} fit(s) ill-conditioned (condition number above {ILL_CONDITIONED:g}): " + "; ".join(lanes)
+            + ". The samples barely determine this many parameters (in either basis: the same column space); "
+            "coefficients are unreliable though the L2 is fine. Try a lower degree or no --interactions."]
 
 
 def _zero_model_check(data, l2, labels, cutoff, zero=None):
@@ -252,8 +272,9 @@ def _print_fit(args, out: dict, model, beta) -> None:
     n_params, status = out["n_params"], out["status"]
     print(f"data: {out['source']}")
     if polynomial:
-        counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
-        print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
+        counts = (f"p={args.degree} ({', '.join(map(str, n_params))} parameters)" if isinstance(n_params, list)
+                  else f"p={args.degree}, {n_params} parameters")
+        print(f"model: polynomial, variables={model.variables}, {counts}, "
               f"basis={args.basis}" + (f", link={out['link']}" if "link" in out else ""))
     else:
         print(f"model: {out['model']}, {n_params} parameters ({', '.join(model.param_names)})")

@@ -252,3 +252,42 @@ def test_svbrdf_zero_lights_names_the_flag(capsys, tmp_path):
     assert main(["svbrdf", "--lights", "0", "--out", str(tmp_path / "t")]) == 2
     line = _one_error_line(capsys, "--lights")
     assert " k" not in line.split("error:")[1]
+
+
+# ---------------------------------------------------------------- 15: conditioning with interactions
+@pytest.mark.data
+def test_interactions_p7_on_curet_25_is_reported_ill_conditioned_in_both_bases(capsys, data_root):
+    """CUReT 25 (205 samples), Lafortune, p = 7 with interactions (36 terms): the design is nearly singular in any
+    basis of that space (condition ~1e8 with Legendre and with monomials, the same L2): a property of the samples,
+    reported as a warning, not a claim of a small condition number."""
+    conds, l2s = [], []
+    for basis in ("legendre", "monomial"):
+        assert main(["--data-root", str(data_root), "fit", "--dataset", "curet:25", "--degree", "7",
+                     "--interactions", "--basis", basis, "--json"]) == 0
+        rec = json.loads(capsys.readouterr().out)
+        conds.append(rec["condition"][0])
+        l2s.append(rec["l2"][0])
+        assert any("ill-conditioned" in w for w in rec["warnings"]), rec["warnings"]
+    assert min(conds) > 1e7 and abs(l2s[0] - l2s[1]) < 1e-9
+    assert main(["--data-root", str(data_root), "fit", "--dataset", "curet:25", "--degree", "7", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["condition"][0] < 100 and not any("ill-conditioned" in w for w in rec["warnings"])
+
+
+# ---------------------------------------------------------------- 16: README's first code block runs
+@pytest.mark.data
+@pytest.mark.slow
+def test_readme_first_code_block_runs_as_written(tmp_path, monkeypatch, data_root):
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = text.split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)  # it saves quarry.npz
+    scope = {}
+    exec(compile(block, "README.md", "exec"), scope)  # noqa: S102 - the documentation's own example
+    assert scope["model"](scope["u_new"], scope["v_new"]).shape == (61, 2)
+
+
+def test_multi_degree_header_gives_the_degrees_then_their_parameter_counts(capsys, no_data):
+    assert main(["fit", "--degree", "2,3"]) == 0
+    assert "p=2,3 (5, 7 parameters)" in capsys.readouterr().out
