@@ -291,3 +291,22 @@ def test_readme_first_code_block_runs_as_written(tmp_path, monkeypatch, data_roo
 def test_multi_degree_header_gives_the_degrees_then_their_parameter_counts(capsys, no_data):
     assert main(["fit", "--degree", "2,3"]) == 0
     assert "p=2,3 (5, 7 parameters)" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- 11: a foreign package named baselines
+def test_a_foreign_baselines_package_is_named_in_the_error(tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    fake = tmp_path / "site" / "baselines"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text('"""An unrelated package that happens to be called baselines."""\n')
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path / 'site'}{os.pathsep}{root}")
+    env.pop(pj.DATA_ENV, None)
+    out = subprocess.run([sys.executable, "-W", "ignore", "-m", "polyjax", "--no-cache", "fit", "--model", "ward"],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2, out.stderr
+    assert str(fake) in out.stderr and "shadows it" in out.stderr, out.stderr
