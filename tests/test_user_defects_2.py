@@ -310,3 +310,18 @@ def test_a_foreign_baselines_package_is_named_in_the_error(tmp_path):
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 2, out.stderr
     assert str(fake) in out.stderr and "shadows it" in out.stderr, out.stderr
+
+
+# ---------------------------------------------------------------- 10: the fit-images example and its format
+def test_fit_images_example_is_written_and_fits(capsys, tmp_path):
+    folder = tmp_path / "example"
+    assert main(["fit-images", "--example", str(folder)]) == 0
+    assert "example written to" in capsys.readouterr().out
+    assert main(["fit-images", str(folder / "scene.json"), "--degree", "3", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["images"] == 3 and rec["status_rgb"] == ["OK", "OK", "OK"] and rec["pixels_used"] > 1000
+    spec = json.loads((folder / "scene.json").read_text())
+    spec["camera"]["fov_deg"] = "wide"
+    (folder / "scene.json").write_text(json.dumps(spec))
+    assert main(["fit-images", str(folder / "scene.json")]) == 2
+    _one_error_line(capsys, "camera.fov_deg", "expected a number", "'wide'")

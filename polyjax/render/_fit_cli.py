@@ -1,24 +1,7 @@
 """The ``polyjax fit-images`` command: fit the polynomial BRDF to EXR photographs described by a JSON scene.
 
-The scene file (paths relative to it)::
-
-    {
-      "camera": {"eye": [0, 0, 5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 30,
-                 "width": 128, "height": 128},
-      "objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1},
-                  {"type": "plane", "height": -1, "normal": [0, 1, 0]}],
-      "target": 0,
-      "images": [
-        {"file": "light0.exr", "lights": [{"type": "point", "position": [3, 2, 4], "intensity": 30}]},
-        {"file": "sky.exr", "lights": [{"type": "environment", "file": "envmap.exr", "scale": 1.0},
-                                       {"type": "directional", "direction": [1, 1, 1], "irradiance": 3}]}
-      ]
-    }
-
-``camera`` fields are those of :class:`polyjax.render.Camera` (``width``/``height`` default to the
-first image's size); lights those of :class:`PointLight` (``position``, ``intensity``),
-:class:`DirectionalLight` (``direction`` towards the light, ``irradiance``) and environment maps
-(a latitude-longitude EXR ``file``, ``scale``). Objects other than the target are occluders only.
+The scene file's format is documented in ``docs/fit-images.md`` (camera, objects, target, images and their lights,
+paths relative to the file); ``polyjax fit-images --example DIR`` writes one with its images to start from.
 """
 
 from __future__ import annotations
@@ -35,9 +18,14 @@ def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "fit-images", parents=list(parents), help="fit the polynomial BRDF to EXR images of one object (JSON scene)",
         description="Fit the polynomial model of equation (3) to linear-RGB EXR images of one object with known "
-        "geometry, camera and lights (a JSON scene description; see polyjax.render._fit_cli), in closed form.",
+        "geometry, camera and lights (a JSON scene description; format in docs/fit-images.md; --example DIR "
+        "writes one to start from), in closed form.",
     )
-    p.add_argument("scene", help="JSON scene description listing the EXR images and their lights")
+    p.add_argument("scene", nargs="?", default=None,
+                   help="JSON scene description listing the EXR images and their lights (format: docs/fit-images.md)")
+    p.add_argument("--example", default=None, metavar="DIR",
+                   help="write a ready example (scene.json and three EXR images of a Phong sphere) into DIR and "
+                   "exit; then run: polyjax fit-images DIR/scene.json")
     p.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
     p.add_argument("--degree", type=int, default=5, help="polynomial degree p (default 5)")
     p.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
@@ -134,8 +122,16 @@ def run_fit_images(args) -> int:
 
     import polyjax as pj
 
-    from .._outputs import check_model_file, strict_json
+    from .._outputs import check_model_file, check_output_dir, strict_json
 
+    if args.example is not None:
+        from ._example_scene import write_example_scene
+
+        path = write_example_scene(check_output_dir(args.example, "--example"))
+        print(f"example written to {path}; fit it with: polyjax fit-images {path}")
+        return 0
+    if args.scene is None:
+        raise InputError("scene: expected a JSON scene file (or --example DIR to write one to start from)")
     if args.save:
         check_model_file(args.save, "--save")  # before any work
     scenes, images, target = load_scene_json(args.scene)
