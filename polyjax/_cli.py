@@ -154,11 +154,12 @@ def _run_fit(args, data, kind, model_name, degree):
 
     from ._aot import fit_saved
     from ._cache import compile_notice
+    from ._progress import progress_line
 
     t0 = time.perf_counter()
     cache = getattr(args, "cache_in_use", None)
     zero = None
-    with compile_notice("the fit", cache):
+    with compile_notice("the fit", cache), progress_line(f"fitting {model_name}"):
         if kind is None:
             options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
                            cutoff_deg=args.cutoff)
@@ -294,8 +295,9 @@ def _print_fit(args, out: dict, model, beta) -> None:
 def cmd_report(args) -> int:
     """The main job: fit the polynomial models of the paper's Tables 1, 2 and 4 and report them."""
     from ._cache import compile_notice
+    from ._progress import progress_line
 
-    with compile_notice("the report's fits", getattr(args, "cache_in_use", None)):
+    with compile_notice("the report's fits", getattr(args, "cache_in_use", None)), progress_line("the report"):
         return _report(args)
 
 
@@ -338,12 +340,34 @@ def _report(args) -> int:
     return 0
 
 
+def cmd_cache(args) -> int:
+    """``polyjax cache info|clear``: what the cache folder holds (files, size, cap), or empty it."""
+    from pathlib import Path
+
+    from ._cache import default_cache_dir
+    from ._cache_admin import MAX_ENV, cache_cap_bytes, cache_usage, clear_cache
+
+    folder = default_cache_dir() if args.cache_dir is None else Path(args.cache_dir).expanduser()
+    if args.action == "clear":
+        n, size = clear_cache(folder)
+        print(f"removed {n} file(s), {size / 2**20:.1f} MiB, from {folder}")
+        return 0
+    use, cap = cache_usage(folder), cache_cap_bytes()
+    print(f"cache folder: {folder}{'' if folder.is_dir() else ' (not created yet)'}")
+    print(f"  {use['files']} file(s), {use['bytes'] / 2**20:.1f} MiB; cap "
+          + (f"{cap / 2**20:.0f} MiB" if cap else "none") + f" (${MAX_ENV}; least recently used files go first)")
+    for part, (n, size) in sorted(use["parts"].items()):
+        what = "JAX's compiled programs" if part == "." else part
+        print(f"  {what}: {n} file(s), {size / 2**20:.1f} MiB")
+    return 0
+
+
 #: the built-in variable sets (pj.variable_sets() without importing JAX to print --help)
 BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley", "rusinkiewicz",
                      "rusinkiewicz-phid")
 
 #: commands defined in this file: parsing them needs none of the other commands' modules (render, export, svbrdf)
-_CORE_COMMANDS = ("fit", "report")
+_CORE_COMMANDS = ("fit", "report", "cache")
 
 
 def _command_of(argv: list[str]) -> str | None:
@@ -408,6 +432,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
     f.set_defaults(func=cmd_fit)
+
+    c = sub.add_parser("cache", parents=[common], help="what the compilation cache folder holds, or empty it",
+                       description="info: the cache folder's files and size, and its cap ($POLYJAX_CACHE_MAX_MB, "
+                       "default 2048; after each run the least recently used files are removed beyond it). clear: "
+                       "remove every file in it (later runs compile again).")
+    c.add_argument("action", choices=["info", "clear"], help="info or clear")
+    c.set_defaults(func=cmd_cache)
     if command in _CORE_COMMANDS:
         return p
 
@@ -450,11 +481,26 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         args.func = cmd_report
     try:
-        args.cache_in_use = _compilation_cache(args)
+        args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
         return int(args.func(args) or 0)
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        _trim(getattr(args, "cache_in_use", None))
+
+
+def _trim(folder) -> None:
+    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax._cache_admin`)."""
+    if folder is None:
+        return
+    from ._cache_admin import cache_cap_bytes, trim_cache
+    from ._errors import InputError
+
+    try:
+        trim_cache(folder, cache_cap_bytes())
+    except InputError as e:
+        print(f"polyjax: warning: cache not trimmed: {e}", file=sys.stderr)
 
 
 if __name__ == "__main__":

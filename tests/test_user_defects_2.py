@@ -325,3 +325,68 @@ def test_fit_images_example_is_written_and_fits(capsys, tmp_path):
     (folder / "scene.json").write_text(json.dumps(spec))
     assert main(["fit-images", str(folder / "scene.json")]) == 2
     _one_error_line(capsys, "camera.fov_deg", "expected a number", "'wide'")
+
+
+# ---------------------------------------------------------------- 17: progress, cache info|clear, a size cap
+class _Terminal:
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+
+def test_long_work_shows_an_elapsed_time_line_on_a_terminal_only(monkeypatch):
+    import io
+    import time
+
+    from polyjax._progress import progress_line
+
+    monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
+    term, pipe = _Terminal(), io.StringIO()
+    with progress_line("fitting ward", after=0.0, interval=0.05, stream=term):
+        time.sleep(0.3)
+    with progress_line("fitting ward", after=0.0, interval=0.05, stream=pipe):
+        time.sleep(0.1)
+    assert term.text.count("\rpolyjax: fitting ward: ") >= 2 and term.text.endswith("\r\033[K")
+    assert pipe.getvalue() == ""
+    quick = _Terminal()
+    with progress_line("fitting ward", after=5.0, stream=quick):  # a short fit: nothing
+        pass
+    assert quick.text == ""
+
+
+def test_cache_info_and_clear_commands(capsys, tmp_path):
+    folder = tmp_path / "cache"
+    (folder / "polyjax-programs").mkdir(parents=True)
+    (folder / "jit_fit-abc-cache").write_bytes(b"x" * 2048)
+    (folder / "polyjax-programs" / "fit-1.bin").write_bytes(b"y" * 1024)
+    assert main(["--cache-dir", str(folder), "cache", "info"]) == 0
+    out = capsys.readouterr().out
+    assert "2 file(s)" in out and "polyjax-programs: 1 file(s)" in out and "cap 2048 MiB" in out
+    assert main(["--cache-dir", str(folder), "cache", "clear"]) == 0
+    assert "removed 2 file(s)" in capsys.readouterr().out
+    assert folder.is_dir() and not [p for p in folder.rglob("*") if p.is_file()]
+
+
+def test_cache_folder_is_trimmed_to_its_cap_after_a_run_oldest_first(capsys, tmp_path, monkeypatch, no_data):
+    import os
+
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    for i in range(4):  # 4 x 0.4 MiB, oldest first
+        p = folder / f"old-{i}-cache"
+        p.write_bytes(b"z" * (400 * 1024))
+        os.utime(p, (1000 + i, 1000 + i))
+    monkeypatch.setenv("POLYJAX_CACHE_MAX_MB", "1")
+    monkeypatch.setenv("POLYJAX_SAVED_PROGRAMS", "off")
+    assert main(["--cache-dir", str(folder), "fit", "--degree", "2", "--json"]) == 0
+    left = sorted(p.name for p in folder.rglob("*") if p.is_file())
+    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 0.8 * 2**20
+    assert "old-0-cache" not in left and "old-1-cache" not in left
