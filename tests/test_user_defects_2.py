@@ -390,3 +390,29 @@ def test_cache_folder_is_trimmed_to_its_cap_after_a_run_oldest_first(capsys, tmp
     left = sorted(p.name for p in folder.rglob("*") if p.is_file())
     assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 0.8 * 2**20
     assert "old-0-cache" not in left and "old-1-cache" not in left
+
+
+# ---------------------------------------------------------------- 1: every export target for a baseline fit
+def test_export_baseline_fit_to_glsl_and_brdf_explorer_by_a_table(capsys, tmp_path, saved_fits):
+    import shutil
+    import subprocess
+
+    from polyjax.export._glsl_table import RESOLUTION, tabulated_numpy
+
+    for target, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf")):
+        out = tmp_path / f"ward{suffix}"
+        assert main(["export", str(saved_fits[1]), "--to", target, "--index", "1", "--out", str(out)]) == 0
+        assert "tabulated BRDF" in out.read_text()
+    ward = pj.load_model(saved_fits[1])[1]
+    u, v, _, above = pj.data.merl_grid(RESOLUTION)  # the table's nodes: the interpolation returns the model there
+    u, v = np.asarray(u)[above][::7], np.asarray(v)[above][::7]
+    got = tabulated_numpy(ward)(u, v)
+    want = np.maximum(np.asarray(ward(u, v)), 0.0)[:, None]
+    np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=1e-6, atol=1e-9)
+    if shutil.which("glslangValidator"):
+        frag = tmp_path / "ward.frag"
+        frag.write_text("#version 120\n" + (tmp_path / "ward.glsl").read_text()
+                        + "void main() { gl_FragColor = vec4(BRDF(vec3(0.3, 0.2, 0.9), vec3(-0.1, 0.4, 0.8), "
+                        "vec3(0, 0, 1), vec3(1, 0, 0), vec3(0, 1, 0)), 1.0); }\n")
+        res = subprocess.run(["glslangValidator", str(frag)], capture_output=True, text=True)
+        assert res.returncode == 0, res.stdout + res.stderr
