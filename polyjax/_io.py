@@ -3,8 +3,9 @@
 File format (version 2): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
 "static": {...}}`` and named arrays. In ``.npz`` the header is the string array ``__meta__`` and every
 array is stored under its name; in ``.json`` the header's keys are at the top level and
-``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``, inf as
-``Infinity``). ``kind`` names a :class:`polyjax.ModelKind` (``"polyjax.PolynomialBRDF"``, or one that
+``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``; inf and NaN as the
+strings ``"Infinity"``, ``"-Infinity"``, ``"NaN"``, so the file is strict JSON; older files with bare ``Infinity``
+still load). ``kind`` names a :class:`polyjax.ModelKind` (``"polyjax.PolynomialBRDF"``, or one that
 another package provides, e.g. ``"baselines.BaselineFit"``), ``static`` its non-array fields.
 Version 1 files (``"format": "polyjax.PolynomialBRDF"``, static fields at the top level) still load.
 """
@@ -60,13 +61,22 @@ def save_model(path: str | os.PathLike, model) -> Path:
         doc = dict(meta)
         doc["arrays"] = {
             k: {"dtype": str(a.dtype), "shape": list(a.shape),
-                "data": [float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
+                "data": [_json_float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
             for k, a in arrays.items()
         }
-        _write_whole(path, lambda f: f.write(json.dumps(doc).encode()))
+        _write_whole(path, lambda f: f.write(json.dumps(doc, allow_nan=False).encode()))
     else:
         _write_whole(path, lambda f: np.savez(f, __meta__=np.asarray(json.dumps(meta)), **arrays))
     return path
+
+
+def _json_float(x):
+    """A float for strict JSON: finite ones as numbers (exact ``repr``), ``inf``/``-inf``/``nan`` as the strings
+    ``"Infinity"``/``"-Infinity"``/``"NaN"`` (numpy reads both back bit-exactly)."""
+    x = float(x)
+    if x == x and abs(x) != float("inf"):
+        return x
+    return "NaN" if x != x else ("Infinity" if x > 0 else "-Infinity")
 
 
 def _write_whole(path: Path, write) -> None:

@@ -416,3 +416,16 @@ def test_export_baseline_fit_to_glsl_and_brdf_explorer_by_a_table(capsys, tmp_pa
                         "vec3(0, 0, 1), vec3(1, 0, 0), vec3(0, 1, 0)), 1.0); }\n")
         res = subprocess.run(["glslangValidator", str(frag)], capture_output=True, text=True)
         assert res.returncode == 0, res.stdout + res.stderr
+
+
+def test_saved_json_model_is_strict_json_and_round_trips_inf(tmp_path, saved_fits):
+    import equinox as eqx
+
+    model = pj.load_model(saved_fits[0])
+    l2 = np.array(model.l2)
+    l2[0, 1], l2[1, 0] = np.inf, np.nan  # as a lane without samples / a flagged lane holds
+    model = eqx.tree_at(lambda m: m.l2, model, jnp.asarray(l2))
+    text = pj.save_model(tmp_path / "m.json", model).read_text()
+    json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
+    back = pj.load_model(tmp_path / "m.json")
+    np.testing.assert_array_equal(np.asarray(back.l2), l2)
