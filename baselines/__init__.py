@@ -16,15 +16,18 @@ from ._common import BaselineModel, Transform
 from ._cook_torrance import cook_torrance
 from ._fit import fit
 from ._fit_images import fit_to_images
+from ._gltf_pbr import gltf_brdf, gltf_pbr
 from ._lafortune import lafortune
 from ._lafortune_anisotropic import lafortune_anisotropic
 from ._oren_nayar import oren_nayar
+from ._principled import principled, principled_brdf
 from ._published import published, published_materials
-from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, get_model
+from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, STANDARD_MODELS, get_model
 from ._result import BaselineFit, BaselineStatus
 from ._saving import KIND as SAVED_MODEL_KIND
 from ._sgd import sgd
 from ._solvers import BACKENDS, residuals
+from ._standard import standard_material
 from ._starts import initial_guesses
 from ._ward import ward
 from ._ward_anisotropic import ward_anisotropic
@@ -38,3 +41,4 @@ __all__ = [
     "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",
     "zernike", "zernike_design", "zernike_terms",
 ]
+__all__ += ["STANDARD_MODELS", "gltf_brdf", "gltf_pbr", "principled", "principled_brdf", "standard_material"]

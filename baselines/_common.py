@@ -133,6 +133,10 @@ class BaselineModel:
     assemble: Callable | None = None
     anisotropic: bool = False
     linear: bool = False  # True for a linear model fitted in closed form (Zernike)
+    #: names of parameters shared by the R, G, B channels of one material, fitted jointly; () fits each channel alone
+    shared_across_channels: tuple[str, ...] = ()
+    #: ``to_material(params (3, P)) -> dict``: a material's constrained R, G, B parameters named as its specification
+    to_material: Callable | None = None
 
     @property
     def n_params(self) -> int:

@@ -34,9 +34,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import polyjax as pj
-from polyjax import InputError, Result, raise_on_status
+from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
+from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
+from ._joint import SUFFIX
 from ._multistart import fit_kernel
 from ._registry import get_model
 from ._result import BaselineFit
@@ -46,6 +48,7 @@ from ._starts import check_n_starts
 from ._zernike import fit_zernike
 
 
+@one_lapack_thread
 def fit(
     name: str,
     u,
@@ -125,6 +128,12 @@ def fit(
     vanishes there), which on the 52 CUReT samples left 29 Ashikhmin-Shirley and 14 Cook-Torrance fits
     at the step limit; with this, 1 and 1.
 
+    A standard material model (:data:`baselines.STANDARD_MODELS`: ``gltf-pbr``, ``principled``, ...) fits the
+    R, G, B channels of each material jointly: ``values (..., 3, n)``, its shared parameters (roughness, metallic,
+    ...) one per material, its colours per channel (:mod:`baselines._joint`); ``params`` stays per channel
+    ``(..., 3, P)`` (shared values repeated), ``l2`` per channel, result codes, steps and starts those of the
+    material, repeated for its channels; ``starts`` are then ``(..., S, Pj)`` in the joint layout.
+
     Returns:
         :class:`BaselineFit` with batch shape ``values.shape[:-1]``. A lane whose kept start did not
         converge has ``success = False`` and its :class:`polyjax.Result` code; parameters are never NaN.
@@ -139,13 +148,18 @@ def fit(
         out = fit_zernike(inp.u, inp.v, inp.values, wl, wc2, order)
         backend = "lstsq"
     else:
-        raw0 = _check_starts(model, starts, inp.values.dtype, inp.batch, max_steps, limit_steps)
+        joint = bool(model.shared_across_channels)
+        if joint:
+            check_channels(model, tuple(inp.batch))
+        raw0 = _check_starts(get_model(model.name + SUFFIX) if joint else model, starts, inp.values.dtype,
+                             tuple(inp.batch[:-1]) if joint else inp.batch, max_steps, limit_steps)
         opts = dict(
             n_starts=int(n_starts if raw0 is None else raw0.shape[1]), max_steps=int(max_steps), rtol=float(rtol),
             atol=float(atol), stage_steps=int(min(stage_steps, max_steps)),
             refine=None if refine is None else int(refine), limit_steps=int(limit_steps),
         )
-        out = _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend, opts)
+        fitter = fit_joint if joint else _fit_nonlinear
+        out = fitter(model, inp, wl, wc2, key, raw0, backend, opts)
     return _result(model, backend, inp, out, throw)
 
 

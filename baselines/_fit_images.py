@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 import polyjax as pj
-from polyjax import InputError, Result, raise_on_status
+from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._fit import fit
 from ._light_sums import light_sum_kernel, package
@@ -42,6 +42,7 @@ from ._starts import check_n_starts
 _LIGHT_SUM_OPTIONS = ("max_steps", "rtol", "atol", "stage_steps", "throw")
 
 
+@one_lapack_thread
 def fit_to_images(
     name: str,
     scenes: Sequence,
@@ -93,6 +94,9 @@ def fit_to_images(
     model = get_model(name)
     if model.linear:
         raise InputError(f"name: {name} is linear; fit it with polyjax.fit_polynomial_to_images-style solves")
+    if model.shared_across_channels:
+        raise InputError(f"name: {name} is a standard material model, fitted jointly over R, G, B by baselines.fit; "
+                         "fit_to_images does not fit it jointly (fit a model to data, or a per-channel model here)")
     check_n_starts(n_starts)
     rows = pj.image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
                          cutoff_deg=cutoff_deg, spp=spp, seed=seed)

@@ -11,15 +11,20 @@ from . import (
     _ashikhmin_shirley,
     _blinn_phong,
     _cook_torrance,
+    _gltf_pbr,
     _lafortune,
     _lafortune_anisotropic,
+    _openpbr,
     _oren_nayar,
+    _principled,
     _sgd,
+    _usd_preview,
     _ward,
     _ward_anisotropic,
     _ward_duer,
 )
 from ._common import REAL, BaselineModel
+from ._joint import SUFFIX, joint_model
 from ._zernike import n_zernike_terms, zernike
 
 ZERNIKE = BaselineModel(
@@ -39,7 +44,10 @@ _ALL = (
     _ashikhmin_shirley.MODEL, _blinn_phong.MODEL, _cook_torrance.MODEL, _lafortune.MODEL, _oren_nayar.MODEL,
     _ward.MODEL, _ward_duer.MODEL, ZERNIKE, _lafortune_anisotropic.MODEL, _ward_anisotropic.MODEL,
     _sgd.MODEL, _abc.MODEL,
+    _openpbr.MODEL, _openpbr.ANISOTROPIC, _openpbr.COAT, _usd_preview.MODEL, _usd_preview.SPECULAR,
+    _usd_preview.CLEARCOAT,
 )
+_ALL += (_gltf_pbr.MODEL, _gltf_pbr.SPECULAR, _gltf_pbr.ANISOTROPIC, _principled.MODEL, _principled.ANISOTROPIC)
 REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}
 
 #: Every model name accepted by :func:`baselines.fit` and :func:`baselines.get_model`.
@@ -49,12 +57,18 @@ PAPER_MODELS: tuple[str, ...] = MODELS[:8]
 #: The paper's nonlinear isotropic models (fitted by Levenberg-Marquardt); ``"sgd"`` and ``"abc"`` (the
 #: published compact models of the 100 MERL materials, :func:`baselines.published`) come after them.
 NONLINEAR_MODELS: tuple[str, ...] = MODELS[:7]
+#: The standard material models (one roughness, metallic, ... for R, G, B: fitted jointly over the channels).
+STANDARD_MODELS: tuple[str, ...] = tuple(m.name for m in _ALL if m.shared_across_channels)
+# their joint R, G, B records, found by get_model under "<name>:rgb" (baselines._joint)
+_JOINT = {m.name + SUFFIX: joint_model(m) for m in _ALL if m.shared_across_channels}
 
 
 
 def get_model(name: str) -> BaselineModel:
     """The :class:`BaselineModel` record of ``name`` (case and ``_``/space insensitive)."""
     key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
+    if key in _JOINT:
+        return _JOINT[key]
     if key not in REGISTRY:
         raise UnknownNameError(f"baseline model {name!r}: expected one of {list(MODELS)}")
     return REGISTRY[key]

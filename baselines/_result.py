@@ -64,24 +64,49 @@ class BaselineFit(eqx.Module):
     def batch_shape(self) -> tuple[int, ...]:
         return tuple(self.l2.shape)
 
-    def __call__(self, u, v) -> Float[Array, "*batch n"]:
-        """Evaluate every fitted lane at directions ``u, v`` ``(n, 3)``: returns ``(*batch, n)``.
+    def material(self, index=()) -> dict:
+        """The fitted material ``index`` of a standard model, named as its specification names it
+        (:func:`baselines.standard_material`; what :func:`polyjax.export.gltf` and ``mitsuba_xml`` take)."""
+        from ._standard import standard_material
+
+        return standard_material(self, index)
+
+    def __getitem__(self, index) -> "BaselineFit":
+        """Select lanes of the batch (``fit[3]``, ``fit[1, 0]``, ``fit[:, 0]``), as ``PolynomialBRDF[index]``."""
+        if not self.batch_shape:
+            raise IndexError("this BaselineFit has no batch axes")
+        idx = index if isinstance(index, tuple) else (index,)
+        if len(idx) > len(self.batch_shape):
+            raise IndexError(f"too many indices ({len(idx)}) for a BaselineFit of batch shape {self.batch_shape}")
+        return jax.tree.map(lambda a: a[idx], self)
+
+    def __call__(self, u, v) -> Float[Array, "*batch ..."]:
+        """Evaluate every fitted lane at directions ``u, v`` ``(..., 3)`` (broadcast together, e.g. ``(n, 3)``
+        or an image's ``(h, w, 3)``): returns ``(*batch, ...)``, as :class:`polyjax.PolynomialBRDF` does.
 
         Directions are renormalised, as :func:`fit` does with its inputs (so a non-unit ``u`` gives
         the same value as ``u / |u|``); a zero vector has no direction and gives 0.
         """
         u = jnp.asarray(u, self.params.dtype)
         v = jnp.asarray(v, self.params.dtype)
-        if u.ndim != 2 or u.shape[-1] != 3 or u.shape != v.shape:
-            raise InputError(f"u, v: expected two (n, 3) arrays of directions, found {u.shape} and {v.shape}")
+        if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
+            raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
+        try:
+            jnp.broadcast_shapes(u.shape, v.shape)
+        except ValueError:
+            raise InputError(f"u and v: expected shapes that broadcast together, found {u.shape} and "
+                             f"{v.shape}") from None
         return _evaluate_batch(self.name, self.params, u, v)
 
 
 @functools.partial(jax.jit, static_argnames=("name",))
 def _evaluate_batch(name, params, u, v):
+    """:meth:`BaselineFit.__call__` after its checks, in one compiled program: the directions broadcast and
+    flattened to ``(N, 3)``, every lane evaluated there, the result shaped ``(*batch, *directions)``."""
     model = get_model(name)
-    u, ok_u = safe_normalize(u)
-    v, ok_v = safe_normalize(v)
+    shape = jnp.broadcast_shapes(u.shape, v.shape)
+    u, ok_u = safe_normalize(jnp.broadcast_to(u, shape).reshape(-1, 3))
+    v, ok_v = safe_normalize(jnp.broadcast_to(v, shape).reshape(-1, 3))
     flat = params.reshape(-1, params.shape[-1])
     out = jax.vmap(lambda p: jnp.where(ok_u & ok_v, model.evaluate(p, u, v), 0.0))(flat)
-    return out.reshape(params.shape[:-1] + (u.shape[0],))
+    return out.reshape(params.shape[:-1] + shape[:-1])

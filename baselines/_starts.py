@@ -51,6 +51,8 @@ def _nonlinear_starts(model: BaselineModel, n_starts: int, key):
 def starts(model: BaselineModel, u, v, y, wc2, key, n_starts):
     """Raw starting parameters ``(B, S, P)``."""
     nl = _nonlinear_starts(model, n_starts, key).astype(y.dtype)  # (S, Pnl)
+    if model.n_linear == 0:  # every parameter nonlinear (the standard materials): the starts as they are
+        return jnp.broadcast_to(model.to_raw(nl), (y.shape[0],) + nl.shape)
     cols = jax.vmap(lambda q: model.columns(q, u, v))(nl)  # (S, n, L)
     lin = jax.vmap(lambda yb, wb: jax.vmap(lambda c: _linear_seed(c, yb, wb))(cols))(y, wc2)  # (B, S, L)
     params = jax.vmap(jax.vmap(model.combine), in_axes=(0, None))(lin, nl)

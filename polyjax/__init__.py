@@ -37,11 +37,13 @@ from ._metrics import fit_weights, l2_error, psnr
 from ._model import FitStatus, PolynomialBRDF, evaluate_paper_form
 from ._pca import PCA, fit_pca
 from ._results import RESULTS, Result, raise_on_status
+from ._threads import THREADS_ENV, lapack_threads, one_lapack_thread
 from ._variables import VariableSet, explanatory_variables, get_variables, register_variables, variable_sets
 
 __version__ = "0.1.0"
 
-_LAZY_SUBMODULES = ("export", "render", "svbrdf")  # imported on first use: they pull in far more than a fit needs
+# imported on first use: they pull in far more than a fit needs
+_LAZY_SUBMODULES = ("export", "render", "svbrdf", "view")
 
 
 def __getattr__(name):
@@ -70,5 +72,6 @@ __all__ = [
     "n_terms",
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
     "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
+    "THREADS_ENV", "lapack_threads", "one_lapack_thread", "view",
     "Capture", "relight",
 ]

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._threads import one_lapack_thread
+
 #: subfolder of the compilation cache folder holding the serialised fits
 FOLDER = "polyjax-programs"
 #: environment variable: ``off`` (or ``0``, ``no``, ``false``) keeps no executables
@@ -85,6 +87,7 @@ def _load_lapack() -> None:
     _lapack.initialize()
 
 
+@one_lapack_thread
 def fit_saved(data, folder: Path | None, **options):
     """``(model, zero_model_l2)`` of :func:`polyjax.fit_polynomial` on ``data`` (a :class:`polyjax.Measurements`)
     with ``options`` (``variables``, ``degree``, ``basis``, ``interactions``, ``cutoff_deg``), from the executable

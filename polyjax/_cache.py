@@ -8,6 +8,7 @@ static arguments and JAX version are the same). The command line turns this on b
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import threading
@@ -79,12 +80,29 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     return folder
 
 
-_counts = {"requests": 0, "answered": 0}
+_counts = {"requests": 0, "answered": 0, "misses": 0}
 _listening = False
+#: the line JAX's compiler logs (at DEBUG) when the persistent cache does not hold a program, just before compiling it
+_MISS = "PERSISTENT COMPILATION CACHE MISS"
+
+
+class _MissCounter(logging.Filter):
+    """Counts JAX's persistent-cache misses from its compiler's log, passing on only the records the logger would
+    have emitted at its level before (so no one's log gets JAX's DEBUG lines)."""
+
+    def __init__(self, level: int):
+        super().__init__()
+        self.level = level
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.msg.startswith(_MISS) if isinstance(record.msg, str) else False:
+            _counts["misses"] += 1
+        return record.levelno >= self.level
 
 
 def _listen() -> None:
-    """Count the persistent cache's look-ups and their outcomes (a hit, or a compiled program written)."""
+    """Count the persistent cache's look-ups, their outcomes (a hit, or a compiled program written) and its misses
+    (JAX logs each one before it compiles the program: the one sure sign that something is being compiled)."""
     global _listening
     if _listening:
         return
@@ -97,6 +115,9 @@ def _listen() -> None:
             _counts["answered"] += 1
 
     jax.monitoring.register_event_listener(on_event)
+    log = logging.getLogger("jax._src.compiler")
+    log.addFilter(_MissCounter(log.getEffectiveLevel()))
+    log.setLevel(min(log.getEffectiveLevel(), logging.DEBUG))
     _listening = True
 
 
@@ -105,8 +126,10 @@ class compile_notice:
 
     The command line wraps its fits in it, so that the seconds JAX spends compiling a program for new shapes are
     not silence. With the cache on, the line appears only while a program that the cache did not hold is being
-    compiled (a warm run that is merely slow stays quiet); with the cache off, whenever the block takes longer than
-    ``delay`` (default 1 s, ``$POLYJAX_COMPILE_NOTICE_SECS``). At most one line per process.
+    compiled: after JAX's cache has missed a program (it logs the miss, then compiles), never while it merely reads
+    programs it holds (a warm run that is slow, or loads large programs, stays quiet); with the cache off, whenever
+    the block takes longer than ``delay`` (default 1 s, ``$POLYJAX_COMPILE_NOTICE_SECS``): every program is then
+    compiled. At most one line per process.
     """
 
     printed = False
@@ -119,7 +142,7 @@ class compile_notice:
         self._thread: threading.Thread | None = None
 
     def _compiling(self) -> bool:
-        return self.cache is None or _counts["requests"] > _counts["answered"]
+        return self.cache is None or _counts["misses"] > 0
 
     def _watch(self) -> None:
         if self._done.wait(self.delay):

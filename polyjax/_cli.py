@@ -6,7 +6,6 @@ The paper's reproduction is a script of the repository, not a command: ``python 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 
@@ -68,6 +67,48 @@ def _lane_labels(data, lead: list[str] | None = None) -> list[str]:
     return [" ".join(parts) for parts in itertools.product(*per_axis)] or [""]
 
 
+def samples_used(data, cutoff) -> int:
+    """The fewest samples any lane of ``data`` keeps: inside the grazing cutoff (the rule of
+    :func:`polyjax.cutoff_mask`), valid in its mask, with a positive weight (numpy on the host: nothing compiled)."""
+    import numpy as np
+
+    u, v = np.asarray(data.u), np.asarray(data.v)
+    cu = u[..., 2] / np.maximum(np.linalg.norm(u, axis=-1), 1e-300)
+    cv = v[..., 2] / np.maximum(np.linalg.norm(v, axis=-1), 1e-300)
+    keep = (cu > 0) & (cv > 0)
+    if cutoff is not None:  # the rule of pj.cutoff_mask, tolerance included
+        c = np.cos(np.radians(float(cutoff))) - 1e-9
+        keep = keep & (cu >= c) & (cv >= c)
+    if data.mask is not None:
+        keep = keep & np.asarray(data.mask)
+    if data.weights is not None:
+        keep = keep & (np.asarray(data.weights) > 0)
+    keep = keep.reshape(-1, keep.shape[-1])
+    return int(keep.sum(axis=-1).min())
+
+
+def check_degrees_fit(data, variables, degrees, interactions, cutoff, flag: str) -> None:
+    """Refuse, before any work, a degree whose polynomial has more parameters than the samples a fit uses (an
+    interpolation, not a model: the command line never asks for one).
+
+    Raises:
+        InputError: naming ``flag``, the parameters and the samples used.
+    """
+    from ._basis import n_terms
+    from ._errors import InputError
+    from ._variables import get_variables
+
+    vs = get_variables(variables)
+    n = samples_used(data, cutoff)
+    for p in degrees:
+        m = n_terms(vs.k, int(p), bool(interactions))
+        if m > n:
+            ok = [q for q in range(int(p), -1, -1) if n_terms(vs.k, q, bool(interactions)) <= n]
+            hint = f"; degree {ok[0]} or lower fits" if ok else ""
+            raise InputError(f"{flag} {p}: expected at most as many parameters as the {n} samples used (inside "
+                             f"the {cutoff} degree cutoff), found {m} parameters ({vs.name} variables{hint})")
+
+
 #: a fit whose L2 is above this fraction of the L2 of f = 0 is reported as barely better than no model
 ZERO_MODEL_RATIO = 0.95
 
@@ -79,21 +120,23 @@ def cmd_fit(args) -> int:
     import polyjax as pj
 
     from ._kinds import fitter_for
-    from ._outputs import check_output_file
+    from ._outputs import check_model_file, strict_json
 
     degrees = _parse_degrees(args.degree)
     degree = degrees[0] if len(degrees) == 1 else degrees
     polynomial = args.model.strip().lower() == "polynomial"
     kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
     if args.save:
-        check_output_file(args.save, "--save")
+        check_model_file(args.save, "--save")
     data, synthetic = _load_dataset(args)
+    if polynomial:
+        check_degrees_fit(data, args.variables, degrees, args.interactions, args.cutoff, "--degree")
     model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, degree)
-    if args.save:
-        pj.save_model(args.save, model)
     out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed)
+    if args.save:
+        out["saved"] = str(pj.save_model(args.save, model))
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
         return 0
     if synthetic:
         print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
@@ -111,15 +154,18 @@ def _run_fit(args, data, kind, model_name, degree):
 
     from ._aot import fit_saved
     from ._cache import compile_notice
+    from ._progress import progress_line
 
     t0 = time.perf_counter()
     cache = getattr(args, "cache_in_use", None)
     zero = None
-    with compile_notice("the fit", cache):
+    with compile_notice("the fit", cache), progress_line(f"fitting {model_name}"):
         if kind is None:
             options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
                            cutoff_deg=args.cutoff)
-            saved = fit_saved(data, cache, **options)
+            link = getattr(args, "link", "identity")
+            saved = fit_saved(data, cache, **options) if link == "identity" else None
+            options.update({} if link == "identity" else dict(link=link))
             model, zero = saved if saved is not None else (pj.fit_polynomial(data, **options), None)
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
@@ -149,6 +195,8 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
               for c in np.asarray(model.status).ravel()]
     labels = _lane_labels(data, [f"p={p}" for p in degrees] if isinstance(degree, list) else None)
     zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff, zero)
+    if polynomial:
+        warnings_ += _condition_warning(np.asarray(model.condition), np.asarray(model.status), labels)
     out = {
         "source": data.source,
         "synthetic": synthetic,
@@ -167,10 +215,30 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
         "seconds": elapsed,
         "warnings": warnings_,
     }
+    if polynomial and getattr(model, "link", "identity") != "identity":
+        out["link"] = model.link
     if polynomial:
         out["rank"] = np.asarray(model.rank).tolist()
         out["condition"] = np.asarray(model.condition).tolist()
     return out, beta
+
+
+#: a full-rank fit whose weighted design has a condition number above this is reported as ill-conditioned
+ILL_CONDITIONED = 1e7
+
+
+def _condition_warning(cond, status, labels) -> list[str]:
+    """A warning naming the full-rank lanes whose condition number exceeds :data:`ILL_CONDITIONED`: the samples
+    barely determine that many parameters (a property of the samples, the same in either basis)."""
+    import numpy as np
+
+    high = (status.ravel() == 0) & np.isfinite(cond.ravel()) & (cond.ravel() > ILL_CONDITIONED)
+    if not high.any():
+        return []
+    lanes = [f"{labels[i]} ({c:.3g})" for i, (c, h) in enumerate(zip(cond.ravel(), high)) if h]
+    return [f"{len(lanes)} fit(s) ill-conditioned (condition number above {ILL_CONDITIONED:g}): " + "; ".join(lanes)
+            + ". The samples barely determine this many parameters (in either basis: the same column space); "
+            "coefficients are unreliable though the L2 is fine. Try a lower degree or no --interactions."]
 
 
 def _zero_model_check(data, l2, labels, cutoff, zero=None):
@@ -205,9 +273,10 @@ def _print_fit(args, out: dict, model, beta) -> None:
     n_params, status = out["n_params"], out["status"]
     print(f"data: {out['source']}")
     if polynomial:
-        counts = ", ".join(map(str, n_params)) if isinstance(n_params, list) else n_params
-        print(f"model: polynomial, variables={model.variables}, p={args.degree}, {counts} parameters, "
-              f"basis={args.basis}")
+        counts = (f"p={args.degree} ({', '.join(map(str, n_params))} parameters)" if isinstance(n_params, list)
+                  else f"p={args.degree}, {n_params} parameters")
+        print(f"model: polynomial, variables={model.variables}, {counts}, "
+              f"basis={args.basis}" + (f", link={out['link']}" if "link" in out else ""))
     else:
         print(f"model: {out['model']}, {n_params} parameters ({', '.join(model.param_names)})")
     flat_beta = beta.reshape(-1, beta.shape[-1])
@@ -219,13 +288,20 @@ def _print_fit(args, out: dict, model, beta) -> None:
     for w in out["warnings"]:
         print(f"WARNING: {w}")
     print(f"fit time (including compilation): {out['seconds']:.3f} s")
+    if out.get("saved"):
+        print(f"model written to {out['saved']}")
 
 
 def cmd_report(args) -> int:
     """The main job: fit the polynomial models of the paper's Tables 1, 2 and 4 and report them."""
     from ._cache import compile_notice
+    from ._progress import progress_line
 
-    with compile_notice("the report's fits", getattr(args, "cache_in_use", None)):
+    with compile_notice("the report's fits", getattr(args, "cache_in_use", None)), progress_line("the report"):
+        if getattr(args, "html", None):
+            from .view._cli import report_page
+
+            return report_page(args, _report)
         return _report(args)
 
 
@@ -268,8 +344,34 @@ def _report(args) -> int:
     return 0
 
 
+def cmd_cache(args) -> int:
+    """``polyjax cache info|clear``: what the cache folder holds (files, size, cap), or empty it."""
+    from pathlib import Path
+
+    from ._cache import default_cache_dir
+    from ._cache_admin import MAX_ENV, cache_cap_bytes, cache_usage, clear_cache
+
+    folder = default_cache_dir() if args.cache_dir is None else Path(args.cache_dir).expanduser()
+    if args.action == "clear":
+        n, size = clear_cache(folder)
+        print(f"removed {n} file(s), {size / 2**20:.1f} MiB, from {folder}")
+        return 0
+    use, cap = cache_usage(folder), cache_cap_bytes()
+    print(f"cache folder: {folder}{'' if folder.is_dir() else ' (not created yet)'}")
+    print(f"  {use['files']} file(s), {use['bytes'] / 2**20:.1f} MiB; cap "
+          + (f"{cap / 2**20:.0f} MiB" if cap else "none") + f" (${MAX_ENV}; least recently used files go first)")
+    for part, (n, size) in sorted(use["parts"].items()):
+        what = "JAX's compiled programs" if part == "." else part
+        print(f"  {what}: {n} file(s), {size / 2**20:.1f} MiB")
+    return 0
+
+
+#: the built-in variable sets (pj.variable_sets() without importing JAX to print --help)
+BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley", "rusinkiewicz",
+                     "rusinkiewicz-phid")
+
 #: commands defined in this file: parsing them needs none of the other commands' modules (render, export, svbrdf)
-_CORE_COMMANDS = ("fit", "report")
+_CORE_COMMANDS = ("fit", "report", "cache")
 
 
 def _command_of(argv: list[str]) -> str | None:
@@ -308,6 +410,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
     r = sub.add_parser("report", parents=[common],
                        help="fit the polynomial models of the paper's tables and report them (default)")
+    r.add_argument("--html", default=None, metavar="PAGE",
+                   help="also write the report with its fits as an interactive HTML page (polyjax view)")
     r.set_defaults(func=cmd_report)
 
     f = sub.add_parser("fit", parents=[common], help="fit a model to one dataset and print L2 and coefficients",
@@ -316,12 +420,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     f.add_argument("--sample", default="25", help="CUReT sample number or name (default 25, Quarry Tile)")
     f.add_argument("--dataset", default=None,
                    help="dataset spec instead of --sample, e.g. curet:1,25, merl-nbrdf:green-latex, cornell:cayman, "
-                   "merl:<file.binary>, nbrdf:<zip or folder>:<name>")
+                   "merl:<file.binary>, nbrdf:<zip or folder>:<name>, rgl:<file.bsdf>")
     f.add_argument("--model", default="polynomial",
                    help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
                    "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")
     f.add_argument("--variables", default="lafortune",
-                   help="ward | ashikhmin-shirley | lafortune | lafortune-anisotropic")
+                   help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES) + " (default lafortune)")
+    f.add_argument("--link", default="identity", choices=["identity", "log"],
+                   help="identity (default: the closed-form fit of equation (3)) or log: f = exp(P) - eps, fitted by "
+                   "a few Gauss-Newton solves (pj.fit_polynomial(..., link='log'))")
     f.add_argument("--degree", "--degrees", dest="degree", default="7",
                    help="polynomial degree p, or comma-separated degrees fitted in one batch (e.g. 2,3,5); default 7")
     f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"],
@@ -331,6 +438,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
     f.set_defaults(func=cmd_fit)
+
+    c = sub.add_parser("cache", parents=[common], help="what the compilation cache folder holds, or empty it",
+                       description="info: the cache folder's files and size, and its cap ($POLYJAX_CACHE_MAX_MB, "
+                       "default 2048; after each run the least recently used files are removed beyond it). clear: "
+                       "remove every file in it (later runs compile again).")
+    c.add_argument("action", choices=["info", "clear"], help="info or clear")
+    c.set_defaults(func=cmd_cache)
     if command in _CORE_COMMANDS:
         return p
 
@@ -354,6 +468,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     from .svbrdf._cli import add_svbrdf_parser
 
     add_svbrdf_parser(sub, parents=[common])
+    from .view._cli import add_view_parser
+
+    add_view_parser(sub, parents=[common])
     return p
 
 
@@ -376,11 +493,26 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         args.func = cmd_report
     try:
-        args.cache_in_use = _compilation_cache(args)
+        args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
         return int(args.func(args) or 0)
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        _trim(getattr(args, "cache_in_use", None))
+
+
+def _trim(folder) -> None:
+    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax._cache_admin`)."""
+    if folder is None:
+        return
+    from ._cache_admin import cache_cap_bytes, trim_cache
+    from ._errors import InputError
+
+    try:
+        trim_cache(folder, cache_cap_bytes())
+    except InputError as e:
+        print(f"polyjax: warning: cache not trimmed: {e}", file=sys.stderr)
 
 
 if __name__ == "__main__":

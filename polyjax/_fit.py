@@ -23,6 +23,7 @@ from ._model import PolynomialBRDF
 from ._results import Result, raise_on_status
 from ._sharding import lane_sharding, shard_lanes
 from ._stream import kept_rows, sampled_rows, stream_geometry, streamed_lane, use_stream
+from ._threads import one_lapack_thread
 from ._variables import get_variables
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
@@ -292,6 +293,7 @@ def _check_options(basis, method, rank_deficient, degree, lane_block):
     return degrees
 
 
+@one_lapack_thread
 def fit_polynomial(
     u,
     v: ArrayLike | None = None,

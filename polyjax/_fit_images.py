@@ -30,6 +30,7 @@ from ._image_rows import image_rows
 from ._image_samples import WEIGHTINGS, fit_samples
 from ._lstsq import METHODS, weighted_lstsq
 from ._model import FitStatus, PolynomialBRDF
+from ._threads import one_lapack_thread
 from ._variables import get_variables
 
 
@@ -37,6 +38,7 @@ def _concrete(x) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
 
 
+@one_lapack_thread
 def fit_polynomial_to_images(
     scenes: Sequence,
     images: Sequence[ArrayLike] | ArrayLike,

@@ -14,9 +14,12 @@ Rules, the same for every fitter and with the same messages:
 * ``weights``: ``(n,)`` (shared by every lane) or ``(*batch, n)``; finite and non-negative. ``mask``: ``(n,)``
   (shared) or ``(*batch, n)``.
 * ``cutoff_deg`` in ``(0, 90]`` or None.
-* non-finite values where the mask is True: ``nonfinite="error"`` raises on concrete input and, where nothing can be
-  raised (under ``jit``), flags the lane (:attr:`PreparedInputs.lane_bad`, reported as ``NONFINITE``);
-  ``nonfinite="mask"`` drops those samples.
+* non-finite values where the mask is True: ``nonfinite="error"`` raises on concrete input (an eager
+  ``jax.grad`` too: the check needs no host copy of the values) and, where nothing can be raised (under ``jit``),
+  flags the lane (:attr:`PreparedInputs.lane_bad`, reported as ``NONFINITE``); ``nonfinite="mask"`` drops those
+  samples.
+* negative or non-finite weights: the same rule, eager and traced: an :class:`InputError` wherever the weights are
+  concrete, else (under ``jit``) every lane using them flagged ``NONFINITE`` with L2 ``inf``, never clipped.
 * One set of samples for every lane (the shared-design path, one factorisation for all lanes) is chosen from the
   shapes alone: ``weights`` and ``mask`` absent or ``(n,)``, and ``nonfinite="error"``. The loaders return
   ``(n,)`` masks whenever every lane has the same valid samples, so their data take that path without any
@@ -117,7 +120,19 @@ def unpack(caller: str, u, v, values, weights, mask):
         mask = data.mask if mask is None else mask
     if v is None or values is None:
         raise InputError(f"{caller}: expected u, v and values (or a polyjax.Measurements)")
-    return u, v, values, weights, mask
+    return tuple(_as_array(name, a) for name, a in
+                 (("u", u), ("v", v), ("values", values), ("weights", weights), ("mask", mask)))
+
+
+def _as_array(name: str, a):
+    """Python lists and tuples (of numbers, nested) as numpy arrays; arrays and scalars unchanged."""
+    if not isinstance(a, (list, tuple)):
+        return a
+    try:
+        return np.asarray(a)
+    except ValueError as e:  # ragged nesting
+        raise InputError(f"{name}: expected an array or a nested list of numbers of one shape, found a ragged "
+                         f"list ({e})") from None
 
 
 def fit_dtype(values) -> jnp.dtype:
@@ -243,20 +258,25 @@ def _prepare_core(ok, values, w, m, *, nonfinite, shared):
     nb = y.shape[0]
     w = jnp.ones((1, n), y.dtype) if w is None else w.reshape(-1, n)
     m = jnp.ones((1, n), bool) if m is None else m.reshape(-1, n)
-    w_bad = ~jnp.all(jnp.isfinite(w)) | jnp.any(w < 0)
+    lane_w_bad = jnp.broadcast_to(jnp.any(~jnp.isfinite(w) | (w < 0), axis=-1), (nb,))
+    w_bad = jnp.any(lane_w_bad)
     m = m & ok[None]
     finite = jnp.isfinite(y)
     bad = m & ~finite  # (B, n)
     any_bad = jnp.any(bad)
     if nonfinite == "mask":
         m = m & finite
-        lane_bad = jnp.zeros((nb,), bool)
+        lane_bad = lane_w_bad
     else:
-        lane_bad = jnp.any(bad, axis=-1)
+        lane_bad = jnp.any(bad, axis=-1) | lane_w_bad
+    # first bad sample (flat index into (B, n)) for the eager message: computed here, so that a caller holding
+    # tracers (an eager jax.grad) needs no host copy of the values
+    first_bad = jnp.argmax(bad.reshape(-1))
+    n_bad = jnp.sum(bad)
     if not shared:
         w = jnp.broadcast_to(w, (nb, n))
         m = jnp.broadcast_to(m, (nb, n))
-    return w, m, lane_bad, w_bad, any_bad, jnp.all(finite)
+    return w, m, lane_bad, w_bad, any_bad, jnp.all(finite), (first_bad, n_bad)
 
 
 @jax.jit
@@ -301,23 +321,29 @@ def prepare_inputs(
     # one compiled program for the array work (op by op it was a dozen programs, each traced and lowered anew
     # in every process: most of a warm `polyjax fit`)
     u, v, ok = _unit_directions(u, v)
-    w, m, lane_bad, w_bad, any_bad, all_finite = _prepare_core(ok, values, w, m, nonfinite=nonfinite, shared=shared)
+    w, m, lane_bad, w_bad, any_bad, all_finite, first = _prepare_core(ok, values, w, m, nonfinite=nonfinite,
+                                                                      shared=shared)
     # the values go on as they are when they are all finite (no copy of a million-sample table), else with 0 for
     # NaN/inf (masked or flagged)
     y = values.reshape(nb, n) if _holds(all_finite) else _finite_values(values)
     if is_concrete(w_bad) and bool(w_bad):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    if nonfinite == "error" and is_concrete(any_bad) and bool(any_bad):
-        bad = np.asarray(m) & ~np.isfinite(np.asarray(values).reshape(nb, n))
-        _raise_nonfinite(bad, values)
+    if nonfinite == "error" and is_concrete(any_bad, *first) and bool(any_bad):
+        _raise_nonfinite_at(int(first[0]), int(first[1]), values.shape)
     return PreparedInputs(u, v, y, w, m, lane_bad, batch, shared), cutoff
 
 
 def _raise_nonfinite(bad, values):
     where = np.argwhere(np.asarray(bad).reshape(values.shape))
+    _raise_nonfinite_at(int(np.ravel_multi_index(where[0], values.shape)), len(where), values.shape)
+
+
+def _raise_nonfinite_at(flat: int, count: int, shape):
+    """The eager error for NaN/inf values: ``count`` of them, the first at C-order index ``flat`` of ``shape``."""
+    index = tuple(int(i) for i in np.unravel_index(flat, shape))
     raise InputError(
-        f"values: expected finite numbers, found {len(where)} NaN/inf (first at index "
-        f"{tuple(int(i) for i in where[0])}) where mask is True; pass nonfinite='mask' to drop them"
+        f"values: expected finite numbers, found {count} NaN/inf (first at index {index}) where mask is True; pass "
+        "nonfinite='mask' to drop them"
     )
 
 
@@ -327,7 +353,7 @@ def _bad_weights(w):
 
 
 @functools.partial(jax.jit, static_argnames=("n_groups", "nonfinite"))
-def _lane_core(u, v, y, m, *, n_groups, nonfinite):
+def _lane_core(u, v, y, m, w, *, n_groups, nonfinite):
     """The array work of :func:`_prepare_lane_directions` in one compiled program: unit directions per group, the
     mask, the per-lane flags and the values with 0 for NaN/inf (plus what its check needs: the bad samples and
     whether there is any)."""
@@ -345,6 +371,8 @@ def _lane_core(u, v, y, m, *, n_groups, nonfinite):
         lane_bad = jnp.zeros((nb,), bool)
     else:
         lane_bad = jnp.any(bad, axis=-1)
+    w_bad = jnp.any(~jnp.isfinite(w) | (w < 0), axis=-1)  # (1,) or (G,): flags the lanes where nothing is raised
+    lane_bad = lane_bad | (jnp.repeat(w_bad, r) if w_bad.shape[0] > 1 and r > 1 else jnp.broadcast_to(w_bad, (nb,)))
     return u, v, jnp.where(finite, y, 0.0), m, lane_bad, bad, jnp.any(bad)
 
 
@@ -368,8 +396,8 @@ def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfi
     m = jnp.ones((1, n), bool) if mask is None else _lane_array("mask", mask, n, batch, bool, dbatch)
     if is_concrete(w) and _holds(_bad_weights(w)):
         raise InputError("weights: expected finite, non-negative solid-angle weights")
-    u, v, y_zeroed, m, lane_bad, bad, any_bad = _lane_core(u, v, y, m, n_groups=n_groups, nonfinite=nonfinite)
-    if nonfinite == "error" and is_concrete(y, m) and _holds(any_bad):
+    u, v, y_zeroed, m, lane_bad, bad, any_bad = _lane_core(u, v, y, m, w, n_groups=n_groups, nonfinite=nonfinite)
+    if nonfinite == "error" and is_concrete(any_bad, bad) and _holds(any_bad):
         _raise_nonfinite(bad, values)
     if nonfinite == "mask" and n_groups != nb and is_concrete(y) and not _holds(_same_nonfinite(y, n_groups)):
         raise InputError("values: nonfinite='mask' with directions shared by several lanes (u of shape "
@@ -381,13 +409,19 @@ def _prepare_lane_directions(u, v, values, weights, mask, batch, n, dtype, nonfi
 MAX_DESIGN_BYTES = 4 * 2**30
 
 
+#: parameters per sample above which a model is refused up front (below it, more parameters than samples is a
+#: minimum-norm interpolation flagged ``RANK_DEFICIENT``; the command line refuses any more than the samples used)
+MAX_PARAMS_PER_SAMPLE = 4
+
+
 def check_parameter_count(what: str, n_params: int, n: int, itemsize: int = 8) -> None:
-    """Refuse absurd models before any work: more than ``max(8 n, 1000)`` parameters for ``n`` samples, or a
+    """Refuse absurd models before any work: more than ``max(4 n, 64)`` parameters for ``n`` samples, or a
     design (``n x n_params``) over :data:`MAX_DESIGN_BYTES`. ``what`` names the arguments that set the count."""
-    limit = max(8 * n, 1000)
+    limit = max(MAX_PARAMS_PER_SAMPLE * n, 64)
     size = n * n_params * itemsize
     if n_params > limit or size > MAX_DESIGN_BYTES:
         raise InputError(
-            f"{what}: expected at most {limit} parameters for {n} samples (8 per sample, at least 1000) and a "
+            f"{what}: expected at most {limit} parameters for {n} samples ({MAX_PARAMS_PER_SAMPLE} per sample, at "
+            f"least 64) and a "
             f"design under {MAX_DESIGN_BYTES / 2**30:.0f} GiB, found {n_params} parameters ({size / 2**30:.3g} GiB)"
         )

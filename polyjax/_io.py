@@ -3,8 +3,9 @@
 File format (version 2): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
 "static": {...}}`` and named arrays. In ``.npz`` the header is the string array ``__meta__`` and every
 array is stored under its name; in ``.json`` the header's keys are at the top level and
-``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``, inf as
-``Infinity``). ``kind`` names a :class:`polyjax.ModelKind` (``"polyjax.PolynomialBRDF"``, or one that
+``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``; inf and NaN as the
+strings ``"Infinity"``, ``"-Infinity"``, ``"NaN"``, so the file is strict JSON; older files with bare ``Infinity``
+still load). ``kind`` names a :class:`polyjax.ModelKind` (``"polyjax.PolynomialBRDF"``, or one that
 another package provides, e.g. ``"baselines.BaselineFit"``), ``static`` its non-array fields.
 Version 1 files (``"format": "polyjax.PolynomialBRDF"``, static fields at the top level) still load.
 """
@@ -13,11 +14,12 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from ._errors import DataFormatError, DataNotFoundError, UnknownNameError
+from ._errors import DataFormatError, DataNotFoundError, InputError, UnknownNameError
 from ._kinds import kind_named, kind_of, module_kind, register_model_kind
 from ._model import FitStatus, PolynomialBRDF
 
@@ -36,15 +38,22 @@ def save_model(path: str | os.PathLike, model) -> Path:
     """Write a fitted model to ``path``: ``.json`` (text, exact float repr) or anything else as ``.npz``.
 
     Args:
-        path: the file; a suffix other than ``.json``/``.npz`` gets ``.npz`` appended.
+        path: the file, ending in ``.json`` or ``.npz`` (the format is chosen by the suffix; any other suffix is
+            refused, never renamed). The file is written whole or not at all (a temporary file renamed).
         model: a :class:`polyjax.PolynomialBRDF` or any model whose class has a :class:`polyjax.ModelKind`
             (e.g. a ``baselines.BaselineFit``).
 
     Returns:
         The path written. A polynomial model's variable set is stored by name: a user-registered set must be
         registered again before loading.
+
+    Raises:
+        InputError: a suffix other than ``.npz`` / ``.json``.
     """
     path = Path(path)
+    if path.suffix not in (".npz", ".json"):
+        raise InputError(f"path {str(path)!r}: expected a model file name ending in .npz or .json, found suffix "
+                         f"{path.suffix or '(none)'!r}")
     kind = kind_of(model)
     static, arrays = kind.to_arrays(model)
     meta = {"format": FORMAT, "version": VERSION, "kind": kind.kind, "static": static}
@@ -52,15 +61,33 @@ def save_model(path: str | os.PathLike, model) -> Path:
         doc = dict(meta)
         doc["arrays"] = {
             k: {"dtype": str(a.dtype), "shape": list(a.shape),
-                "data": [float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
+                "data": [_json_float(x) if a.dtype.kind == "f" else int(x) for x in a.ravel()]}
             for k, a in arrays.items()
         }
-        path.write_text(json.dumps(doc))
+        _write_whole(path, lambda f: f.write(json.dumps(doc, allow_nan=False).encode()))
     else:
-        if path.suffix != ".npz":
-            path = path.with_suffix(path.suffix + ".npz") if path.suffix else path.with_suffix(".npz")
-        np.savez(path, __meta__=np.asarray(json.dumps(meta)), **arrays)
+        _write_whole(path, lambda f: np.savez(f, __meta__=np.asarray(json.dumps(meta)), **arrays))
     return path
+
+
+def _json_float(x):
+    """A float for strict JSON: finite ones as numbers (exact ``repr``), ``inf``/``-inf``/``nan`` as the strings
+    ``"Infinity"``/``"-Infinity"``/``"NaN"`` (numpy reads both back bit-exactly)."""
+    x = float(x)
+    if x == x and abs(x) != float("inf"):
+        return x
+    return "NaN" if x != x else ("Infinity" if x > 0 else "-Infinity")
+
+
+def _write_whole(path: Path, write) -> None:
+    """``write(file)`` into a temporary file beside ``path``, then renamed onto it: never a half-written model."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def load_model(path: str | os.PathLike):
@@ -85,7 +112,7 @@ def load_model(path: str | os.PathLike):
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["__meta__"]))
                 arrays = {k: z[k] for k in z.files if k != "__meta__"}
-    except (ValueError, KeyError, TypeError, OSError) as e:
+    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
         raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
     fmt = meta.get("format") if isinstance(meta, dict) else meta
     if fmt == FORMAT_V1:

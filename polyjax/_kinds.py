@@ -78,6 +78,8 @@ def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, statu
 
 _REGISTRY: dict[str, ModelKind] = {}
 _LOADED_ENTRY_POINTS: set[str] = set()
+#: why an entry point (by name, e.g. "baselines.BaselineFit") failed to load, for the errors that need its kind
+_LOAD_FAILURES: dict[str, str] = {}
 
 
 def register_model_kind(kind: ModelKind) -> ModelKind:
@@ -98,11 +100,35 @@ def _load_entry_points() -> None:
         try:
             obj = ep.load()
         except Exception as e:  # noqa: BLE001  (a broken provider must not break the others)
-            warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: {e}",
-                          stacklevel=3)
+            shadow = _shadowing_package(ep.value)
+            _LOAD_FAILURES[ep.name] = shadow or f"its entry point {ep.value!r} failed to load: {e}"
+            warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: "
+                          f"{shadow or e}", stacklevel=3)
             continue
         if isinstance(obj, ModelKind):
             _REGISTRY.setdefault(obj.kind, obj)
+
+
+def _shadowing_package(value: str) -> str | None:
+    """When the top-level package of entry point ``value`` (e.g. ``baselines`` of ``baselines._saving:KIND``) is
+    importable but is not the one that declares it (another package of that name, e.g. an unrelated ``baselines``
+    from the package index, found first on ``sys.path``): a message saying so, naming where it was found."""
+    import importlib.util
+
+    module = value.split(":")[0]
+    top = module.split(".")[0]
+    try:
+        spec = importlib.util.find_spec(top)
+        own = importlib.util.find_spec(module) if spec is not None else None
+    except (ImportError, ValueError):
+        return None
+    inside = own is not None and any(str(own.origin or "").startswith(str(loc))
+                                     for loc in (spec.submodule_search_locations or []))
+    if spec is None or inside:
+        return None
+    where = spec.origin or ", ".join(spec.submodule_search_locations or [])
+    return (f"the package {top!r} found at {where} is not polyjax's {top!r} (it has no {module!r}): another package "
+            f"of that name shadows it; uninstall it (pip uninstall {top}) or put polyjax's first on sys.path")
 
 
 def model_kinds() -> dict[str, ModelKind]:
@@ -115,6 +141,8 @@ def kind_named(name: str) -> ModelKind:
     """The kind stored in a file under ``name``; UnknownNameError when no installed package provides it."""
     if name not in _REGISTRY:
         _load_entry_points()
+    if name not in _REGISTRY and name in _LOAD_FAILURES:
+        raise UnknownNameError(f"model kind {name!r}: {_LOAD_FAILURES[name]}")
     if name not in _REGISTRY:
         raise UnknownNameError(
             f"model kind {name!r}: not provided by any installed package (known: {sorted(_REGISTRY)}); install the "
@@ -147,4 +175,5 @@ def fitter_for(name: str) -> tuple[ModelKind, str]:
             if m.lower() == key and k.fit is not None:
                 return k, m
     known = sorted(m for k in kinds.values() if k.fit is not None for m in k.models)
-    raise UnknownNameError(f"--model {name!r}: expected 'polynomial' or one of {known}")
+    failed = "".join(f"; {kind} unavailable: {why}" for kind, why in _LOAD_FAILURES.items())
+    raise UnknownNameError(f"--model {name!r}: expected 'polynomial' or one of {known}{failed}")

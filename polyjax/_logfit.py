@@ -40,11 +40,13 @@ from ._errors import InputError
 from ._measurements import Measurements
 from ._metrics import fit_weights, l2_error
 from ._model import PolynomialBRDF
+from ._threads import one_lapack_thread
 
 #: the step lengths tried after every Gauss-Newton solve (0, the current model, is always a candidate)
 STEP_LENGTHS = (1.0, 0.5, 0.25)
 
 
+@one_lapack_thread
 def fit_log_polynomial(
     u,
     v: ArrayLike | None = None,

@@ -27,6 +27,7 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float, Int
 
 from ._linalg import qr_r, svd, tall_qr
+from ._threads import one_lapack_thread
 
 METHODS = ("qr", "svd")
 #: designs with at least this many rows (and 8 times more rows than columns) take the Gram-based
@@ -53,6 +54,7 @@ class LstsqSolution(eqx.Module):
     n_active: Int[Array, ""]
 
 
+@one_lapack_thread
 def weighted_lstsq(
     design: Float[Array, "n m"],
     y: Float[Array, "n ..."],

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._linalg import eigh
+from ._threads import one_lapack_thread
 
 
 class PCA(eqx.Module):
@@ -37,6 +38,7 @@ class PCA(eqx.Module):
         return (x - self.mean) @ self.rotation
 
 
+@one_lapack_thread
 @jax.jit
 def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> PCA:
     """Fit the PCA of the rows of ``x`` where ``keep > 0``.

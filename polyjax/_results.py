@@ -25,7 +25,8 @@ class RESULTS(eqx.Enumeration):
         "the weighted design has lower numerical rank than parameters (minimum-norm solution returned)"
     )
     no_samples = "no sample survived the cutoff and the masks (coefficients 0, L2 inf)"
-    nonfinite = "non-finite numbers: NaN/inf among the values fitted, or a non-finite (overflowing) L2 or solution"
+    nonfinite = ("non-finite numbers: NaN/inf among the values fitted, or a non-finite (overflowing) L2 or solution; "
+                 "also negative or non-finite weights under jit (eagerly an InputError)")
     max_steps = "the solver reached its step limit before its tolerances"
     failed = "the solver failed"
 

@@ -18,6 +18,14 @@ TRUE_PARAMS = {
     "lafortune-anisotropic": [0.3, -1.0, -0.7, 0.9, 10.0],
     "ward-anisotropic": [0.3, 0.25, 0.12, 0.3],
 }
+#: one channel's parameters of the standard material models (fitted jointly over R, G, B)
+STANDARD_PARAMS = {
+    "gltf-pbr": [0.6, 0.3, 0.4],
+    "gltf-pbr-specular": [0.6, 0.3, 0.4, 0.7, 1.6],
+    "gltf-pbr-anisotropic": [0.6, 0.3, 0.4, 0.5, 0.7],
+    "principled": [0.6, 0.4, 0.3, 0.6],
+    "principled-anisotropic": [0.6, 0.4, 0.3, 0.6, 0.5],
+}
 
 
 def synthetic_geometry(n: int = 400, seed: int = 0, max_deg: float = 78.0):

@@ -7,11 +7,12 @@ import functools
 
 import jax.numpy as jnp
 import numpy as np
+from _standard_problems import STANDARD_PARAMS as OPENPBR_USD_PARAMS
 
 import baselines as bl
 import polyjax as pj
 
-from _baseline_problems import TRUE_PARAMS
+from _baseline_problems import STANDARD_PARAMS, TRUE_PARAMS
 from _problems import curet, random_hemisphere  # noqa: F401 - re-exported for the robustness modules
 
 #: Stated bound on L2(float32) / L2(float64) for the default Legendre basis up to p = 15
@@ -55,7 +56,7 @@ def baseline_params(name: str):
     """Known constrained parameters of a baseline model (a 55-term ramp for Zernike)."""
     if name == "zernike":
         return jnp.linspace(-1.0, 1.0, bl.n_zernike_terms(8))
-    return jnp.asarray(TRUE_PARAMS[name] if name in TRUE_PARAMS else PUBLISHED_LIKE[name])
+    return jnp.asarray({**TRUE_PARAMS, **STANDARD_PARAMS, **OPENPBR_USD_PARAMS, **PUBLISHED_LIKE}[name])
 
 
 #: Parameters of the published compact models, typical of their MERL fits (``kap`` folded into ``rho_s``).

@@ -28,6 +28,11 @@ import os
 import sys
 from pathlib import Path
 
+# the tests' own numpy and scipy calls (reference fits) with one BLAS thread, as polyjax's calls have by themselves
+# (polyjax/_threads.py): the two pytest-xdist workers share two cores, where OpenBLAS's busy-waiting threads starve
+# each other; set before numpy loads its OpenBLAS, inherited by the workers and subprocesses (tests/test_threads.py
+# starts its processes without it)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 #: "full" compiles the tests' programs with XLA's full optimisation, as users get them
 _OPT_ENV = "POLYJAX_TEST_XLA_OPT"
 #: XLA's CPU code generation by its elemental emitters instead of its fusion emitters: a third of the compile time
@@ -155,6 +160,7 @@ FILE_SECONDS = {"test_sampling.py": 64, "test_grad_fit.py": 60, "test_export.py"
     "test_cli_usability.py": 9, "test_data_merl.py": 8, "test_robust_symmetry.py": 7, "test_cli.py": 7,
     "test_fit_images_cli.py": 6, "test_inputs.py": 6, "test_render_image.py": 6, "test_data_cornell.py": 5,
     "test_architecture.py": 3}
+FILE_SECONDS["test_data_rgl.py"] = 38
 #: where a file not in the table (not measured yet) starts: as a file of this many seconds
 UNMEASURED_SECONDS = 20
 

@@ -151,9 +151,8 @@ def test_brdf_explorer_file(tmp_path):
     assert "\n".join(lines[i + 1:j]).strip() == ex.glsl(MODELS["lafortune"]).strip()
 
 
-def test_unsupported_models_raise():
-    with pytest.raises(pj.InputError, match="PolynomialBRDF"):
-        ex.glsl(cook_torrance())
+def test_models_without_a_program_are_tabulated_and_batches_raise():
+    assert ex.glsl(cook_torrance()).startswith("// polyjax tabulated BRDF")  # no expression program: a table
     data = pj.data.synthetic_default()
     with pytest.raises(pj.InputError, match="batch shape"):
         ex.glsl(pj.fit_polynomial(data, variables="ward", degree=[2, 3]))

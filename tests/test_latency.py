@@ -81,12 +81,12 @@ def test_cache_folder_settings(tmp_path, monkeypatch):
 def test_compile_notice_one_line_only_while_compiling(monkeypatch):
     monkeypatch.setattr(cache_mod.compile_notice, "printed", False)
     quiet = io.StringIO()
-    monkeypatch.setattr(cache_mod, "_counts", {"requests": 3, "answered": 3})  # the cache answered every look-up
+    monkeypatch.setattr(cache_mod, "_counts", {"requests": 3, "answered": 3, "misses": 0})  # every look-up a hit
     with cache_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=quiet):
         time.sleep(0.3)
     assert quiet.getvalue() == ""
     loud = io.StringIO()
-    monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3})  # one program being compiled
+    monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3, "misses": 1})  # one being compiled
     with cache_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=loud):
         time.sleep(0.3)
     assert loud.getvalue().count("\n") == 1 and loud.getvalue().startswith("polyjax: compiling the fit")

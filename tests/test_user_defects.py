@@ -28,7 +28,7 @@ def test_zernike_order_20_on_205_samples_is_rank_deficient_not_ok(problem):
 
 def test_zernike_absurd_order_is_refused_up_front(problem):
     u, v, b = problem
-    with pytest.raises(pj.InputError, match=r"order=40 \(Zernike\): expected at most 1640 parameters .* found 3311"):
+    with pytest.raises(pj.InputError, match=r"order=40 \(Zernike\): expected at most 820 parameters .* found 3311"):
         bl.fit("zernike", u, v, b, order=40)
 
 

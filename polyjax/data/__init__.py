@@ -62,6 +62,7 @@ from ._nbrdf import (
     resolve_merl_name,
 )
 from ._photometric import PNG16_MAX, check_png_header, load_photometric, read_mat_array, read_png
+from ._rgl import RGLBRDF, load_rgl, read_rgl, resolve_rgl_path
 from ._synthetic import synthetic_default
 from ._tabulate import tabulate
 
@@ -75,5 +76,6 @@ __all__ = [
     "directions_to_rusinkiewicz", "load_merl_binary", "merl_bin_angles", "merl_bin_weights", "merl_grid",
     "merl_index", "read_merl_binary", "rusinkiewicz_to_directions", "write_merl_binary", "NeuralBRDF",
     "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name",
-    "tabulate", "PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png",
+    "tabulate", "PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png", "RGLBRDF",
+    "load_rgl", "read_rgl", "resolve_rgl_path",
 ]

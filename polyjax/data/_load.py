@@ -11,9 +11,10 @@ from ._cornell import load_cornell
 from ._curet import load_curet
 from ._merl import load_merl_binary
 from ._nbrdf import _is_merl_name, load_merl_nbrdf, load_nbrdf_measurements
+from ._rgl import load_rgl
 
 _KINDS = ("'curet:<sample>', 'merl-nbrdf:<material>', 'nbrdf:<zip or folder>[:<material>,...]', "
-          "'cornell:<material>' or 'merl:<path to .binary>'")
+          "'cornell:<material>', 'merl:<path to .binary>' or 'rgl:<.bsdf file or name>'")
 
 
 def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measurements:
@@ -30,7 +31,9 @@ def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measure
               (:func:`load_nbrdf_measurements`; options ``subsample``, ``seed``); ``"nbrdf:<MERL name>"``
               is ``"merl-nbrdf:<MERL name>"``;
             - ``"cornell:cayman"`` (also ``garnet_red``, ``acryl_blue`` or a file path; option ``channels``);
-            - ``"merl:/path/to/file.binary"``: a MERL ``.binary`` file (options ``subsample``, ``seed``).
+            - ``"merl:/path/to/file.binary"``: a MERL ``.binary`` file (options ``subsample``, ``seed``);
+            - ``"rgl:/path/to/file.bsdf"`` or ``"rgl:paper_white_rgb"`` (in ``<root>/rgl_epfl/``): an RGL-EPFL
+              measured BSDF on the MERL grid (:func:`load_rgl`; options ``subsample``, ``seed``, ``clip``).
         root: data root (default ``$POLYJAX_DATA``).
         **options: passed to the loader (:func:`load_merl_nbrdf`, :func:`load_cornell`, :func:`load_merl_binary`).
     """
@@ -60,4 +63,8 @@ def load(spec: str, root: str | os.PathLike | None = None, **options) -> Measure
         if not items:
             raise UnknownNameError(f"dataset {spec!r}: expected 'merl:<path to .binary>[,<path>...]'")
         return load_merl_binary(items[0] if len(items) == 1 else items, **options)
+    if kind == "rgl":
+        if not rest.strip():
+            raise UnknownNameError(f"dataset {spec!r}: expected 'rgl:<.bsdf file or name in <root>/rgl_epfl>'")
+        return load_rgl(rest.strip(), root=root, **options)
     raise UnknownNameError(f"dataset {spec!r}: expected {_KINDS}")

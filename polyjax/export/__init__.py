@@ -2,8 +2,12 @@
 Mitsuba 3 BSDF plugin (``mitsuba_bsdf``, needs the optional ``mitsuba`` package)."""
 
 from ._glsl import brdf_explorer, glsl, numpy_function
+from ._gltf import gltf
+from ._materialx import materialx
 from ._merl import merl_binary, tabulate_merl
 from ._mitsuba import mitsuba_bsdf, register_mitsuba_bsdf
+from ._mitsuba_xml import mitsuba_xml
+from ._usd import usd
 
-__all__ = ["brdf_explorer", "glsl", "merl_binary", "mitsuba_bsdf", "numpy_function", "register_mitsuba_bsdf",
-           "tabulate_merl"]
+__all__ = ["brdf_explorer", "glsl", "gltf", "materialx", "merl_binary", "mitsuba_bsdf", "mitsuba_xml", "numpy_function",
+           "register_mitsuba_bsdf", "tabulate_merl", "usd"]

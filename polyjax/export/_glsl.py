@@ -24,12 +24,17 @@ def glsl(model, name: str = "BRDF") -> str:
 
     Args:
         model: a :class:`polyjax.PolynomialBRDF` of batch shape ``()``, ``(1,)`` or ``(3,)``, or a
-            ``polyjax.data.NeuralBRDF`` (its network written out).
+            ``polyjax.data.NeuralBRDF`` (its network written out); any other BRDF (e.g. a ``baselines.BaselineFit``
+            of one lane or three channels) is tabulated (:mod:`polyjax.export._glsl_table`).
         name: the function's name (BRDF Explorer calls ``BRDF``).
 
     Returns:
         The source (GLSL 1.20 and later: scalar ``float`` arithmetic, ``sqrt``, ``max``).
     """
+    if not _has_program(model):  # baseline fits and other BRDFs: a table (polyjax/export/_glsl_table.py)
+        from ._glsl_table import tabulated_glsl
+
+        return tabulated_glsl(model, name)
     prog = program(model)
     if hasattr(model, "variables"):
         header = _HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
@@ -45,6 +50,14 @@ def glsl(model, name: str = "BRDF") -> str:
         f"{prog.glsl_body()}\n"
         "    return vec3(out_r, out_g, out_b);\n}\n"
     )
+
+
+def _has_program(model) -> bool:
+    """Whether ``model`` has an expression program (a polynomial model or a neural BRDF), else it is tabulated."""
+    from .._model import PolynomialBRDF
+    from ..data._nbrdf import NeuralBRDF
+
+    return isinstance(model, (PolynomialBRDF, NeuralBRDF))
 
 
 def brdf_explorer(model, path: str | os.PathLike) -> Path:

@@ -83,7 +83,7 @@ def run_render(args) -> int:
 
     import polyjax as pj
 
-    from .._cli import _parse_degrees
+    from .._cli import _parse_degrees, check_degrees_fit
     from .._config import configured_data_root
     from .._outputs import check_output_file
     from . import Camera, Scene, Sphere, SwapUV, mosaic, render_grid, write_exr, write_png
@@ -94,6 +94,8 @@ def run_render(args) -> int:
     degrees = _parse_degrees(args.degrees, "--degrees")
     spec = args.dataset or ("curet:25" if configured_data_root(root) is not None else "synthetic")
     m = pj.data.synthetic_default() if spec == "synthetic" else pj.data.load(spec, root)
+    if not args.model or args.model.strip().lower() == "polynomial":
+        check_degrees_fit(m, args.variables, degrees, False, 80.0, "--degrees")
     has_channels = bool(m.axes) and m.axes[-1] == "channel"
     vals = np.asarray(m.values)
     n_mat = int(np.prod(vals.shape[: vals.ndim - (2 if has_channels else 1)], dtype=int))

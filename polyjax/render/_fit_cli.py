@@ -1,24 +1,7 @@
 """The ``polyjax fit-images`` command: fit the polynomial BRDF to EXR photographs described by a JSON scene.
 
-The scene file (paths relative to it)::
-
-    {
-      "camera": {"eye": [0, 0, 5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 30,
-                 "width": 128, "height": 128},
-      "objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1},
-                  {"type": "plane", "height": -1, "normal": [0, 1, 0]}],
-      "target": 0,
-      "images": [
-        {"file": "light0.exr", "lights": [{"type": "point", "position": [3, 2, 4], "intensity": 30}]},
-        {"file": "sky.exr", "lights": [{"type": "environment", "file": "envmap.exr", "scale": 1.0},
-                                       {"type": "directional", "direction": [1, 1, 1], "irradiance": 3}]}
-      ]
-    }
-
-``camera`` fields are those of :class:`polyjax.render.Camera` (``width``/``height`` default to the
-first image's size); lights those of :class:`PointLight` (``position``, ``intensity``),
-:class:`DirectionalLight` (``direction`` towards the light, ``irradiance``) and environment maps
-(a latitude-longitude EXR ``file``, ``scale``). Objects other than the target are occluders only.
+The scene file's format is documented in ``docs/fit-images.md`` (camera, objects, target, images and their lights,
+paths relative to the file); ``polyjax fit-images --example DIR`` writes one with its images to start from.
 """
 
 from __future__ import annotations
@@ -35,9 +18,14 @@ def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "fit-images", parents=list(parents), help="fit the polynomial BRDF to EXR images of one object (JSON scene)",
         description="Fit the polynomial model of equation (3) to linear-RGB EXR images of one object with known "
-        "geometry, camera and lights (a JSON scene description; see polyjax.render._fit_cli), in closed form.",
+        "geometry, camera and lights (a JSON scene description; format in docs/fit-images.md; --example DIR "
+        "writes one to start from), in closed form.",
     )
-    p.add_argument("scene", help="JSON scene description listing the EXR images and their lights")
+    p.add_argument("scene", nargs="?", default=None,
+                   help="JSON scene description listing the EXR images and their lights (format: docs/fit-images.md)")
+    p.add_argument("--example", default=None, metavar="DIR",
+                   help="write a ready example (scene.json and three EXR images of a Phong sphere) into DIR and "
+                   "exit; then run: polyjax fit-images DIR/scene.json")
     p.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
     p.add_argument("--degree", type=int, default=5, help="polynomial degree p (default 5)")
     p.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
@@ -82,11 +70,14 @@ def load_scene_json(path: str | Path):
             raise InputError(f"{path}: images[{i}]: file {f} not found")
         images.append(read_exr(f))
     cam_spec = dict(_field(spec, "camera", str(path), required=True))
+    for key in ("fov_deg", "width", "height", "ortho_height"):
+        if key in cam_spec and (isinstance(cam_spec[key], bool) or not isinstance(cam_spec[key], (int, float))):
+            raise InputError(f"{path}: camera.{key}: expected a number, found {cam_spec[key]!r}")
     cam_spec.setdefault("height", images[0].shape[0])
     cam_spec.setdefault("width", images[0].shape[1])
     try:
         camera = Camera(**cam_spec)
-    except TypeError as e:
+    except (TypeError, ValueError) as e:
         raise InputError(f"{path}: camera: {e}") from None
     placeholder = Lambertian(0.5)
     objects = []
@@ -100,7 +91,7 @@ def load_scene_json(path: str | Path):
                 objects.append(Plane(placeholder, **args))
             else:
                 raise InputError(f"{path}: objects[{i}]: expected type 'sphere' or 'plane', found {kind!r}")
-        except TypeError as e:
+        except (TypeError, ValueError) as e:
             raise InputError(f"{path}: objects[{i}]: {e}") from None
     scenes = []
     for i, e in enumerate(entries):
@@ -119,7 +110,7 @@ def load_scene_json(path: str | Path):
                                               float(args.get("scale", 1.0))))
                 else:
                     raise InputError(f"{where}: expected type 'point', 'directional' or 'environment', found {kind!r}")
-            except TypeError as err:
+            except (TypeError, ValueError) as err:
                 raise InputError(f"{where}: {err}") from None
         scenes.append(Scene(camera, objects, lights))
     return scenes, images, int(spec.get("target", 0))
@@ -131,6 +122,18 @@ def run_fit_images(args) -> int:
 
     import polyjax as pj
 
+    from .._outputs import check_model_file, check_output_dir, strict_json
+
+    if args.example is not None:
+        from ._example_scene import write_example_scene
+
+        path = write_example_scene(check_output_dir(args.example, "--example"))
+        print(f"example written to {path}; fit it with: polyjax fit-images {path}")
+        return 0
+    if args.scene is None:
+        raise InputError("scene: expected a JSON scene file (or --example DIR to write one to start from)")
+    if args.save:
+        check_model_file(args.save, "--save")  # before any work
     scenes, images, target = load_scene_json(args.scene)
     model = pj.fit_polynomial_to_images(
         scenes, images, variables=args.variables, degree=args.degree, target=target, saturation=args.saturation,
@@ -146,7 +149,7 @@ def run_fit_images(args) -> int:
         pj.save_model(args.save, model)
         out["saved"] = str(args.save)
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         print(f"fit-images: {out['images']} images, {out['pixels_used']} pixels used, {args.variables} p={args.degree}")
         print("  RMS radiance residual (R, G, B): " + ", ".join(f"{x:.4g}" for x in out["rms_residual_rgb"]))

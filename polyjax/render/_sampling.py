@@ -58,6 +58,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from .._errors import InputError
+from .._threads import one_lapack_thread
 from ._brdf import evaluate_rgb, rgb_brdf
 
 _QUARTER_PI = 0.25 * np.pi
@@ -340,6 +341,7 @@ def _tables(brdf, theta_max, n_views, resolution, supersample, dtype):
     return jax.tree.map(jax.lax.stop_gradient, jax.lax.map(one, views))
 
 
+@one_lapack_thread
 def importance_sampler(brdf, *, resolution: int = 64, n_views: int = 16, theta_max_deg: float = 88.0,
                        alpha: float = 0.1, supersample: int = 2, dtype=None) -> ImportanceSampler:
     """Build the :class:`ImportanceSampler` of any BRDF polyjax evaluates.

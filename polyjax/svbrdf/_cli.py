@@ -4,7 +4,6 @@ light; on one process or several (``--num-processes``, ``--process-id``, ``--coo
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 
@@ -67,8 +66,25 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
     return p
 
 
+def _check_samples_per_texel(args, cameras) -> None:
+    """Refuse, before any work, per-texel fits with more parameters than a texel can have samples (one per light
+    and camera): every texel's fit would fail."""
+    from .._basis import n_terms
+    from .._errors import InputError
+    from .._variables import get_variables
+
+    n_cameras = 1 if cameras is None else len(cameras)
+    m = n_terms(get_variables(args.variables).k, args.degree)
+    if m > args.lights * n_cameras:
+        raise InputError(f"--degree {args.degree}: expected at most as many parameters as the samples of a texel "
+                         f"(--lights {args.lights} x {n_cameras} camera(s) = {args.lights * n_cameras}), found {m} "
+                         f"parameters ({args.variables} variables): every texel's fit would fail; use a lower "
+                         "--degree or more --lights")
+
+
 def run_svbrdf(args) -> int:
     from .._errors import InputError
+    from .._outputs import check_output_dir, strict_json
     from . import _distributed
     from ._shards import FORMATS
 
@@ -77,6 +93,12 @@ def run_svbrdf(args) -> int:
     formats = tuple(f.strip() for f in args.format.split(","))
     if not all(f in FORMATS for f in formats) or len(set(formats)) != len(formats):
         raise InputError(f"--format: expected npz, exr or npz,exr, found {args.format!r}")
+    if args.lights < 1:
+        raise InputError(f"--lights: expected at least one light, found {args.lights}")
+    if args.size < 1:
+        raise InputError(f"--size: expected at least one texel per side, found {args.size}")
+    _check_samples_per_texel(args, cameras)
+    check_output_dir(args.out, "--out")  # the one rule of every command: its parent folder must exist
     _distributed.initialize(args.coordinator, args.num_processes, args.process_id)  # before any JAX computation
     import jax
     import jax.numpy as jnp
@@ -120,14 +142,19 @@ def run_svbrdf(args) -> int:
     summary = dict(texels=args.size**2, cameras=1 if cap.camera.ndim == 1 else int(cap.camera.shape[0]),
                    processes=jax.process_count(), devices=jax.device_count(),
                    fit_seconds=t_fit, texels_per_second=args.size**2 / t_fit, psnr_new_light=psnr,
-                   not_ok_local=int(status), manifest=str(manifest), materials=names)
+                   not_ok_local=int(status), manifest=str(manifest), materials=names,
+                   warnings=[f"{int(status)} texel fits not OK"] if int(status) else [])
     if jax.process_index() == 0:
         if args.json:
-            print(json.dumps(summary))
+            print(strict_json(summary))
         else:
             print(f"{summary['texels']} texels ({', '.join(names)}), {summary['processes']} process(es), "
                   f"{summary['devices']} device(s): fitted in {t_fit:.2f} s ({summary['texels_per_second']:.0f} "
                   f"texels/s, incl. compilation)")
             print(f"re-rendered under a new light at {light}: PSNR {psnr:.2f} dB against the simulated photograph")
             print(f"texture shards and manifest: {manifest}")
+            if summary["not_ok_local"]:
+                print(f"WARNING: {summary['not_ok_local']} of {mine.status.size} texel fits here are not OK "
+                      f"(status other than OK: e.g. too few lit samples for degree {args.degree}); the PSNR above "
+                      "includes them. Try a lower --degree or more --lights.")
     return 0

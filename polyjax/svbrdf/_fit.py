@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from .._fit import LANE_BLOCK, fit_polynomial
 from .._model import PolynomialBRDF
+from .._threads import one_lapack_thread
 from ._capture import Capture
 
 
+@one_lapack_thread
 def fit_capture(capture: Capture, variables: str = "lafortune", degree: int = 3, *, cutoff_deg: float | None = 80.0,
                 lane_block: int = LANE_BLOCK, sharding=None, **options) -> PolynomialBRDF:
     r"""Fit a polynomial BRDF (equation (3)) to every texel of ``capture`` from its photographs.

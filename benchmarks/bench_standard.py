@@ -1,0 +1,158 @@
+"""Benchmark: what accuracy the standard material models cost, on the neural-MERL materials.
+
+Claim measured: the L2 of equation (11) and the log metric of every standard model (glTF 2.0 metallic-roughness,
+with KHR_materials_specular + _ior, Mitsuba's principled), fitted R, G, B jointly (one roughness per material),
+beside a closed-form polynomial, Cook-Torrance (one fit per channel) and the published SGD / ABC fits; fit time
+per material; rendered spheres (measured vs glTF vs principled) for a few materials.
+
+Same protocol as ``bench_merl100.py``: ``--eval-bins`` (20,000, seed 0) valid MERL bins score every model, the
+nonlinear fits use a separate ``--fit-bins`` subsample (seed 1), ``--chunk`` materials per batched call, 16 starts;
+fit time per material is the mean over the chunks after the first (so without compilation).
+
+Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_standard.py [--materials N] [--out DIR]`` (writes
+``standard.md``, ``standard.csv`` and ``standard.png``).
+"""
+
+import argparse
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import baselines as bl  # noqa: E402
+import polyjax as pj  # noqa: E402
+import polyjax.render as pr  # noqa: E402
+from benchmarks.bench_merl100 import published_predictions, scores  # noqa: E402
+
+STANDARD = ("gltf-pbr", "gltf-pbr-specular", "principled")
+PER_CHANNEL = ("cook-torrance",)
+POLY = ("log Rus p=4 surface", dict(variables="rusinkiewicz", degree=4, interactions=True, link="log"))
+FIGURE = ("alum-bronze", "blue-metallic-paint", "yellow-plastic", "green-latex")
+
+
+def _chunks(dfit, n, chunk):
+    for s in range(0, n, chunk):
+        yield s, pj.Measurements(u=dfit.u, v=dfit.v, values=dfit.values[s:s + chunk], weights=dfit.weights,
+                                 mask=dfit.mask if dfit.mask.ndim == 1 else dfit.mask[s:s + chunk],
+                                 names=dfit.names[s:s + chunk], channels=dfit.channels, axes=dfit.axes,
+                                 source=dfit.source)
+
+
+def fit_models(d, dfit, n, chunk, preds, times, fits):
+    for name in STANDARD + PER_CHANNEL:
+        out, ts, bad, params = [], [], 0, []
+        for _, sub in _chunks(dfit, n, chunk):
+            t = time.perf_counter()
+            f = bl.fit(name, sub, n_starts=16)
+            f.params.block_until_ready()
+            ts.append((time.perf_counter() - t) / sub.values.shape[0])
+            bad += int(np.sum(~np.asarray(f.success)))
+            out.append(f(d.u, d.v))
+            params.append(np.asarray(f.params))
+        preds[name] = jnp.concatenate(out)
+        fits[name] = np.concatenate(params)
+        times[name] = float(np.mean(ts[1:])) if len(ts) > 1 else ts[0]
+        print(f"  {name}: {times[name]:.2f} s per material (first chunk {ts[0] * chunk:.1f} s incl. compile); "
+              f"{bad} of {3 * n} lanes not converged  [load {open('/proc/loadavg').read().split()[0]}]", flush=True)
+
+
+def fit_poly(d, n, preds, times):
+    label, opts = POLY
+    fit = jax.jit(lambda y, w: pj.fit_polynomial(d.u, d.v, y, weights=w, **opts))
+    out, ts = [], []
+    for i in range(n):
+        t = time.perf_counter()
+        m = fit(d.values[i], d.weights)
+        m.coefficients.block_until_ready()
+        ts.append(time.perf_counter() - t)
+        out.append(m(d.u, d.v))
+    preds[label] = jnp.stack(out)
+    times[label] = float(np.median(ts[1:])) if n > 1 else ts[0]
+
+
+def _fit_brdf(name, params):
+    p = jnp.asarray(params)
+    z = jnp.zeros((3,), jnp.int32)
+    return bl.BaselineFit(params=p, raw=p, l2=jnp.zeros(3), status=z, steps=z, success=z == 0,
+                          start_l2=jnp.zeros((3, 1)), start_status=z[:, None], best_start=z,
+                          at_limit=jnp.zeros(p.shape, bool), name=name)
+
+
+def figure(names, fits, out: Path, size=96):
+    """Spheres under one point light: the neural MERL BRDF, its glTF and principled fits (tone-mapped x/(1+x))."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cam = pr.Camera(eye=(0.0, 0.0, 5.0), width=size, height=size, fov_deg=30.0)
+    shown = [m for m in FIGURE if m in names]
+    fig, axes = plt.subplots(len(shown), 3, figsize=(6, 2 * len(shown)), squeeze=False)
+    for r, mat in enumerate(shown):
+        i = names.index(mat)
+        brdfs = [pj.data.load_nbrdf(mat), _fit_brdf("gltf-pbr", fits["gltf-pbr"][i]),
+                 _fit_brdf("principled", fits["principled"][i])]
+        for c, (brdf, title) in enumerate(zip(brdfs, ("measured (neural)", "glTF", "principled"))):
+            scene = pr.Scene(cam, [pr.Sphere(brdf)], [pr.PointLight((3.0, 2.0, 4.0), 30.0)])
+            img = np.asarray(pr.render(scene, dtype=jnp.float64).image)
+            axes[r, c].imshow(np.clip(img / (1 + img), 0, 1) ** (1 / 2.2))
+            axes[r, c].set_xticks([])
+            axes[r, c].set_yticks([])
+            axes[r, c].set_title(f"{mat}: {title}" if c == 0 else title, fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+
+
+def table(names, d, preds, times) -> str:
+    rows = ["| model | P | median L2 (eq. 11) | median log metric | beats glTF (L2) | fit time / material (s) |",
+            "|---|---|---|---|---|---|"]
+    l2 = {k: scores(d.values, p, d)[0] for k, p in preds.items()}
+    lg = {k: scores(d.values, p, d)[1] for k, p in preds.items()}
+    n_par = {"gltf-pbr": "3 + 2", "gltf-pbr-specular": "3 + 4", "principled": "3 + 3", "cook-torrance": "3 x 4",
+             POLY[0]: "3 x 70", "published sgd": "3 x 10", "published abc": "3 x 5"}
+    for k in preds:
+        t = f"{times[k]:.3f}" if k in times else "-"
+        beats = int(np.sum(l2[k] < l2["gltf-pbr"]))
+        rows.append(f"| {k} | {n_par.get(k, '')} | {np.median(l2[k]):.4g} | {np.median(lg[k]):.4g} | "
+                    f"{beats} / {len(names)} | {t} |")
+    return "\n".join(rows), l2, lg
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--materials", type=int, default=100, help="N MERL materials, the figure's first (default 100)")
+    ap.add_argument("--eval-bins", type=int, default=20000)
+    ap.add_argument("--fit-bins", type=int, default=5000)
+    ap.add_argument("--chunk", type=int, default=10)
+    ap.add_argument("--out", default="standard_out")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    names = list(dict.fromkeys(FIGURE + tuple(pj.data.MERL_NAMES)))[: args.materials]  # the figure's first
+    d = pj.data.load_merl_nbrdf(names, subsample=args.eval_bins, seed=0)
+    dfit = pj.data.load_merl_nbrdf(names, subsample=args.fit_bins, seed=1)
+    preds, times, fits = {}, {}, {}
+    for name in ("sgd", "abc"):
+        preds[f"published {name}"] = published_predictions(name, names, d)
+    fit_poly(d, len(names), preds, times)
+    fit_models(d, dfit, len(names), args.chunk, preds, times, fits)
+    md, l2, lg = table(names, d, preds, times)
+    (out / "standard.md").write_text(md + "\n")
+    with open(out / "standard.csv", "w") as fh:
+        fh.write("material," + ",".join(f"l2 {k}" for k in preds) + "," + ",".join(f"log {k}" for k in preds) + "\n")
+        for i, n in enumerate(names):
+            fh.write(n + "," + ",".join(f"{l2[k][i]:.6g}" for k in preds) + ","
+                     + ",".join(f"{lg[k][i]:.6g}" for k in preds) + "\n")
+    figure(names, fits, out / "standard.png")
+    print(md)
+    print(f"total {time.perf_counter() - t0:.0f} s; load average {open('/proc/loadavg').read().split()[:3]}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,103 @@
+"""The cache folder's housekeeping: what it holds (``polyjax cache info``), emptying it (``polyjax cache clear``) and
+a size cap applied after every command-line run (least recently used files removed first).
+
+The folder holds JAX's persistent compilation cache (its entries at the top level), the command line's saved
+executables (``polyjax-programs/``, :mod:`polyjax._aot`) and the streamed fits' geometry
+(:mod:`polyjax._geometry_store`). Every file there is a cache entry that a later run can make again.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+#: environment variable: the cache folder's size cap in MiB (``0`` or ``off``: no cap)
+MAX_ENV = "POLYJAX_CACHE_MAX_MB"
+#: the default cap, MiB
+DEFAULT_MAX_MB = 2048
+
+
+def cache_cap_bytes() -> int | None:
+    """The size cap in bytes from ``$POLYJAX_CACHE_MAX_MB`` (default :data:`DEFAULT_MAX_MB`); None for no cap.
+
+    Raises:
+        InputError: a value that is not a non-negative number.
+    """
+    from ._errors import InputError
+
+    text = os.environ.get(MAX_ENV, str(DEFAULT_MAX_MB)).strip().lower()
+    if text in ("off", "none", ""):
+        return None
+    try:
+        mb = float(text)
+    except ValueError:
+        mb = -1.0
+    if mb < 0:
+        raise InputError(f"${MAX_ENV}: expected a size in MiB (a non-negative number) or 'off', found {text!r}")
+    return None if mb == 0 else int(mb * 2**20)
+
+
+def _files(folder: Path) -> list[tuple[Path, int, float]]:
+    """Every file under ``folder``: ``(path, bytes, last use)`` (last use: the later of access and change)."""
+    out = []
+    for dirpath, _, names in os.walk(folder):
+        for name in names:
+            p = Path(dirpath) / name
+            try:
+                st = p.stat()
+            except OSError:  # removed meanwhile
+                continue
+            out.append((p, st.st_size, max(st.st_atime, st.st_mtime)))
+    return out
+
+
+def cache_usage(folder: str | os.PathLike) -> dict:
+    """``{"folder", "files", "bytes", "parts": {subfolder or ".": [files, bytes]}}`` of the cache folder."""
+    folder = Path(folder)
+    parts: dict[str, list[int]] = {}
+    files = _files(folder) if folder.is_dir() else []
+    for p, size, _ in files:
+        rel = p.relative_to(folder).parts
+        key = rel[0] if len(rel) > 1 else "."
+        entry = parts.setdefault(key, [0, 0])
+        entry[0] += 1
+        entry[1] += size
+    return {"folder": str(folder), "files": len(files), "bytes": sum(s for _, s, _ in files), "parts": parts}
+
+
+def clear_cache(folder: str | os.PathLike) -> tuple[int, int]:
+    """Remove every file under the cache folder (the folder itself stays); returns ``(files, bytes)`` removed."""
+    n = size = 0
+    folder = Path(folder)
+    for p, s, _ in _files(folder) if folder.is_dir() else []:
+        try:
+            p.unlink()
+        except OSError:
+            continue
+        n, size = n + 1, size + s
+    return n, size
+
+
+def trim_cache(folder: str | os.PathLike, max_bytes: int | None) -> tuple[int, int]:
+    """Keep the cache folder under ``max_bytes``: when over it, remove the least recently used files until it holds
+    at most 80 % of it (so that not every run trims). Returns ``(files, bytes)`` removed; nothing is ever an error."""
+    folder = Path(folder)
+    if max_bytes is None or not folder.is_dir():
+        return 0, 0
+    files = _files(folder)
+    total = sum(s for _, s, _ in files)
+    if total <= max_bytes:
+        return 0, 0
+    n = removed = 0
+    for p, s, _ in sorted(files, key=lambda f: f[2]):
+        if total - removed <= 0.8 * max_bytes:
+            break
+        try:
+            p.unlink()
+        except OSError:
+            continue
+        n, removed = n + 1, removed + s
+    return n, removed
+
+
+__all__ = ["DEFAULT_MAX_MB", "MAX_ENV", "cache_cap_bytes", "cache_usage", "clear_cache", "trim_cache"]

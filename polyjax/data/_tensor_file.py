@@ -1,0 +1,119 @@
+r"""Mitsuba's ``tensor_file`` container (``TensorFile`` in Mitsuba 3, ``Tensor`` in the RGL-EPFL ``brdf-loader``).
+
+Layout (little-endian):
+
+- 12 bytes ``"tensor_file\0"``; version, 2 x uint8, ``(1, 0)``; uint32 field count;
+- per field: uint16 name length, the name (ASCII), uint16 ``ndim``, uint8 dtype (Mitsuba's ``Struct`` type codes:
+  1 uint8, 2 int8, 3 uint16, 4 int16, 5 uint32, 6 int32, 7 uint64, 8 int64, 9 float16, 10 float32, 11 float64),
+  uint64 byte offset of the data, ``ndim`` x uint64 shape;
+- each field's data, C order, at its offset.
+
+:func:`read_tensor_file` checks every byte count against the file's size before reading, so a truncated or foreign
+file is a :class:`polyjax.DataFormatError` naming the file, never a short read.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import DataNotFoundError
+from ._errors import EmptyFileError, HeaderError, TruncatedFileError, WrongFormatError
+
+MAGIC = b"tensor_file\0"
+#: Mitsuba ``Struct`` type codes of a ``tensor_file`` field -> numpy dtypes (little-endian).
+DTYPES = {1: "u1", 2: "i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4", 7: "<u8", 8: "<i8", 9: "<f2", 10: "<f4",
+          11: "<f8"}
+_MAX_FIELDS = 4096
+_MAX_NDIM = 16
+
+
+class _Cursor:
+    """Reads little-endian integers from the header, raising :class:`TruncatedFileError` past the end."""
+
+    def __init__(self, path: Path, data: bytes, start: int):
+        self.path, self.data, self.pos = path, data, start
+
+    def take(self, n: int, what: str) -> bytes:
+        if self.pos + n > len(self.data):
+            raise TruncatedFileError(self.path, f"{n} bytes for {what} at byte {self.pos}",
+                                     f"a file of {len(self.data)} bytes")
+        out = self.data[self.pos:self.pos + n]
+        self.pos += n
+        return out
+
+    def uint(self, size: int, what: str) -> int:
+        return int.from_bytes(self.take(size, what), "little")
+
+
+def _read_bytes(path) -> tuple[Path, bytes]:
+    path = Path(path)
+    if not path.is_file():
+        raise DataNotFoundError(f"{path}: no such tensor file (a Mitsuba/RGL-EPFL '.bsdf' file)")
+    data = path.read_bytes()
+    if not data:
+        raise EmptyFileError(path, "a Mitsuba tensor_file", "an empty file (0 bytes)")
+    if len(data) < len(MAGIC) + 6:
+        raise TruncatedFileError(path, f"at least {len(MAGIC) + 6} bytes (header, version, field count)",
+                                 f"{len(data)} bytes")
+    if data[:len(MAGIC)] != MAGIC:
+        raise WrongFormatError(path, "a Mitsuba tensor_file (starting with the 12 bytes 'tensor_file\\0')",
+                               f"the bytes {data[:12]!r}")
+    if tuple(data[12:14]) != (1, 0):
+        raise HeaderError(path, "tensor_file version (1, 0)", f"version {tuple(data[12:14])}")
+    return path, data
+
+
+def _read_field(cur: _Cursor, index: int):
+    path = cur.path
+    name_bytes = cur.take(cur.uint(2, f"the name length of field {index}"), f"the name of field {index}")
+    try:
+        name = name_bytes.decode("ascii")
+    except UnicodeDecodeError:
+        raise HeaderError(path, f"an ASCII name for field {index}", f"the bytes {name_bytes[:40]!r}") from None
+    ndim = cur.uint(2, f"the rank of field {name!r}")
+    code = cur.uint(1, f"the dtype of field {name!r}")
+    offset = cur.uint(8, f"the offset of field {name!r}")
+    if ndim > _MAX_NDIM:
+        raise HeaderError(path, f"at most {_MAX_NDIM} dimensions for field {name!r}", f"{ndim}")
+    if code not in DTYPES:
+        raise HeaderError(path, f"a tensor_file dtype code {sorted(DTYPES)} for field {name!r}", f"code {code}")
+    shape = tuple(cur.uint(8, f"the shape of field {name!r}") for _ in range(ndim))
+    dtype = np.dtype(DTYPES[code])
+    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if offset + nbytes > len(cur.data):
+        raise TruncatedFileError(path, f"{nbytes} bytes of field {name!r} {shape} {dtype.name} at byte {offset}",
+                                 f"a file of {len(cur.data)} bytes ({offset + nbytes - len(cur.data)} missing)")
+    values = np.frombuffer(cur.data, dtype, int(np.prod(shape, dtype=object)), offset).reshape(shape)
+    return name, values
+
+
+def read_tensor_file(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read every field of a ``tensor_file`` (module docstring) as read-only numpy arrays of the stored dtype.
+
+    Args:
+        path: the file.
+
+    Returns:
+        ``{name: array}`` in file order.
+
+    Raises:
+        DataNotFoundError: no such file.
+        DataFormatError: not a tensor file, an unknown version or dtype, a header or data past the end of the file,
+            a field named twice (:class:`TruncatedFileError`, :class:`WrongFormatError`, :class:`HeaderError`).
+    """
+    path, data = _read_bytes(path)
+    cur = _Cursor(path, data, len(MAGIC) + 2)
+    count = cur.uint(4, "the field count")
+    if count > _MAX_FIELDS:
+        raise HeaderError(path, f"a field count of at most {_MAX_FIELDS}", f"{count}")
+    fields: dict[str, np.ndarray] = {}
+    for i in range(count):
+        name, values = _read_field(cur, i)
+        if name in fields:
+            raise HeaderError(path, "each field named once", f"the field {name!r} twice")
+        fields[name] = values
+    return fields
+

@@ -1,0 +1,22 @@
+"""``polyjax view``: one self-contained interactive HTML page of fits and measured data (WebGL2).
+
+Every fit or data set becomes a :class:`ViewItem`: a GLSL function printed by the expression builder of the GLSL
+export (polynomial and neural models), a MERL-grid table shown through a 3D texture (dense measured data, and
+models the expression builder does not cover, e.g. baseline fits, tabulated at the bin centres), or scattered
+points (CUReT, Cornell). The page shows a lit sphere (point light moved by dragging or the arrow keys, exposure),
+the lobe in the plane of incidence, the ``(theta_h, theta_d)`` slice and the albedo against view elevation, two
+items side by side with their error image, and the numbers of each fit. ``docs/viewer.md``.
+
+Typical use::
+
+    pj.view.write_page([model, "curet:25"], "page.html")
+    pj.view.serve_page("page.html")                    # http://127.0.0.1:<port>/ only
+"""
+
+from ._environment import environment_map
+from ._items import DENSE_FRACTION, MERL_RESOLUTION, ViewItem, as_items, data_items, items_from_argument, model_items
+from ._page import ViewSettings, page_html, write_page
+from ._serve import serve_page
+
+__all__ = ["DENSE_FRACTION", "MERL_RESOLUTION", "ViewItem", "ViewSettings", "as_items", "data_items", "environment_map",
+           "items_from_argument", "model_items", "page_html", "serve_page", "write_page"]
