@@ -97,10 +97,14 @@ def _load_entry_points() -> None:
         if key in _LOADED_ENTRY_POINTS:
             continue
         _LOADED_ENTRY_POINTS.add(key)
+        # checked before loading: an editable install's import hook would find the provider's module below a
+        # foreign package of the same name, and load it as if it belonged there
+        shadow = _shadowing_package(ep.value)
         try:
+            if shadow:
+                raise ImportError(shadow)
             obj = ep.load()
         except Exception as e:  # noqa: BLE001  (a broken provider must not break the others)
-            shadow = _shadowing_package(ep.value)
             _LOAD_FAILURES[ep.name] = shadow or f"its entry point {ep.value!r} failed to load: {e}"
             warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: "
                           f"{shadow or e}", stacklevel=3)
