@@ -448,6 +448,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     if command in _CORE_COMMANDS:
         return p
 
+    _add_other_commands(sub, common)
+    return p
+
+
+def _add_other_commands(sub, common) -> None:
+    """The commands beyond the core ones (render, fit-images, fit-photos, relight, export, svbrdf, view), each from
+    its own module, imported here so that ``polyjax fit`` does not load them."""
     try:
         from .render._cli import add_render_parser, run_render
     except ImportError:
@@ -471,7 +478,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     from .view._cli import add_view_parser
 
     add_view_parser(sub, parents=[common])
-    return p
 
 
 def _compilation_cache(args):
