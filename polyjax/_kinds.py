@@ -121,6 +121,8 @@ def _shadowing_package(value: str) -> str | None:
 
     module = value.split(":")[0]
     top = module.split(".")[0]
+    if module == top:  # the entry point names a top-level module itself: nothing can stand in front of a part of it
+        return None
     try:
         spec = importlib.util.find_spec(top)
         own = importlib.util.find_spec(module) if spec is not None else None
