@@ -9,10 +9,12 @@ Workloads, each repeated for ``--seconds`` after compilation:
 - ``matmul``: a jitted (768, 768) @ (768, 768) product, 8 times (XLA's own threads, plain JAX).
 
 Groups of 1, 2 and 4 processes run each workload at once (started together, after each has compiled everything),
-and one process runs it in 2 Python threads; each group under three settings: ``off`` (polyjax leaves LAPACK's
-threads as the environment set them: the code before this benchmark's change), ``on`` (the default: one LAPACK
-thread inside polyjax's calls) and ``env`` (``OPENBLAS_NUM_THREADS=1`` set before the process started, the
-known-good reference). Reported: the median time per call of each process, its ratio to one process alone under
+and one process runs it in 2 Python threads; each group under four settings: ``off`` (polyjax leaves LAPACK's
+threads as the environment set them: the code before the limit), ``on`` (the default: jaxlib's LAPACK library set
+to one thread at polyjax's first call and kept there), ``restore`` (the first design, kept for comparison: one
+thread inside each call, ``with pj.lapack_threads(1)`` around it, the previous count put back after) and ``env``
+(``OPENBLAS_NUM_THREADS=1`` set before the process started, the known-good reference).
+Reported: the median time per call of each process, its ratio to one process alone under
 the same setting, and the group's throughput against one process alone. Target (with N processes on C cores):
 each call at most ``1.25 max(1, N / C)`` times the time alone (``on``) for a call that keeps one core busy alone (the
 LAPACK work), and ``1.25 max(1, N u / C)`` for one that keeps ``u`` cores busy alone (XLA's own threads: two processes
@@ -36,7 +38,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKLOADS = ("curet", "baseline", "merl", "render", "matmul")
-SETTINGS = ("off", "on", "env")
+SETTINGS = ("off", "on", "restore", "env")
 
 
 def _workloads(names):
@@ -82,12 +84,24 @@ def _time_calls(fn, seconds, times):
         times.append(time.perf_counter() - t0)
 
 
-def worker(names, threads):
+def _restoring(fn):
+    """``fn`` inside ``pj.lapack_threads(1)``: one thread for the call, the previous count put back after it."""
+    import polyjax as pj
+
+    def call():
+        with pj.lapack_threads(1):
+            return fn().block_until_ready()
+    return call
+
+
+def worker(names, threads, restore):
     """A worker process: compile every workload, say 'ready', then run each workload when told to."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
     fns, what = _workloads(names)
+    if restore:
+        fns = {k: _restoring(f) for k, f in fns.items()}
     for fn in fns.values():
         fn().block_until_ready()
         fn().block_until_ready()
@@ -108,11 +122,12 @@ def worker(names, threads):
 
 def _group(n_procs, threads, setting, names, seconds):
     """Start ``n_procs`` workers, run every workload on all of them at once; {name: [per-worker result]}."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), POLYJAX_LAPACK_THREADS="off" if setting != "on" else "1")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), POLYJAX_LAPACK_THREADS="1" if setting == "on" else "off")
     env.pop("OPENBLAS_NUM_THREADS", None)
     if setting == "env":
         env["OPENBLAS_NUM_THREADS"] = "1"
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", ",".join(names), "--threads", str(threads)]
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", ",".join(names), "--threads", str(threads)] + (
+        ["--restore"] if setting == "restore" else [])
     procs = [subprocess.Popen(cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
              for _ in range(n_procs)]
     info = [json.loads(p.stdout.readline()) for p in procs]
@@ -146,10 +161,11 @@ def main():
     ap.add_argument("--settings", default=",".join(SETTINGS))
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--threads", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--restore", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     names = [w for w in args.workloads.split(",") if w]
     if args.worker is not None:
-        return worker(args.worker.split(","), args.threads)
+        return worker(args.worker.split(","), args.threads, args.restore)
     cores = os.cpu_count()
     groups = [(int(n), 1, f"{n} process{'es' if int(n) > 1 else ''}") for n in args.procs.split(",")] + [
         (1, 2, "2 threads, 1 process")]
@@ -158,7 +174,7 @@ def main():
     rows, alone, data = [], {}, None
     for n, threads, label in groups:
         for setting in settings:
-            if setting == "env" and n * threads > 2:  # the reference setting alone and in pairs, as measured before
+            if setting in ("env", "restore") and n * threads > 2:  # references: alone and in pairs
                 continue
             res, data = _group(n, threads, setting, names, args.seconds)
             print(f"{label}, {setting}: " + "; ".join(f"{k} {[round(m * 1e3, 2) for r in v for m in r['median']]} ms"

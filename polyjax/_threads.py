@@ -1,39 +1,48 @@
-"""LAPACK's threads inside polyjax's calls: one by default, whatever the process's environment.
+"""LAPACK's threads in a process that runs polyjax: one, whatever the process's environment.
 
 jaxlib's CPU LAPACK kernels (QR, SVD, ``eigh``, Cholesky, triangular solves) call the OpenBLAS that scipy ships.
 Its worker threads busy-wait for work; when processes share the cores they starve each other, and a small
 factorisation runs 100x slower (OpenBLAS issue 5517). polyjax's factorisations are small (tens of columns, one
-matrix at a time), so those threads buy nothing even alone: one thread is 1.8x faster there
+matrix at a time), so those threads buy nothing even alone: one thread is faster there
 (``benchmarks/bench_concurrency.py``).
 
-So every public call of polyjax that factorises (the fits, the PCA, the weighted solve, the sampling tables)
-runs inside :class:`lapack_threads`: on entry the BLAS libraries loaded in the process (scipy's OpenBLAS, which
-jaxlib's LAPACK uses, and numpy's) are set to one thread; the call's results are waited for (JAX dispatches
-asynchronously, and OpenBLAS reads its thread count when a kernel starts); on exit each library's previous count
-is put back. Outside polyjax's calls the user's setting (``OPENBLAS_NUM_THREADS``, ``threadpoolctl``) is
-untouched. Calls under a JAX trace (``jit``/``grad``/``vmap`` of polyjax) run later, in the caller's program: wrap
-that program's call in ``with pj.lapack_threads():`` to get the same.
+The rule (:func:`limit_lapack_threads`, run at the start of every public call of polyjax that factorises: the fits,
+the PCA, the weighted solve, the sampling tables, the baselines' fits):
 
-The switch: ``POLYJAX_LAPACK_THREADS`` (read at each call) is ``1`` by default, an integer ``N`` for ``N``
-threads, or ``off`` to leave the libraries as they are.
+- if jaxlib's LAPACK library is not loaded yet, it is loaded now with ``OPENBLAS_NUM_THREADS`` set to the limit
+  for the moment of loading (the variable is put back at once), so OpenBLAS starts no worker threads at all;
+- if it was loaded before (the user's own scipy call), its count is set to the limit (``threadpoolctl``);
+- either way the count **stays** at the limit after the call. Putting it back after each call was measured to be
+  the wrong way: every change of OpenBLAS's count wakes its workers, which then spin, so a process alone kept 1.95
+  cores busy on a fit that needs one, and two such processes ran 60-100x slower again (``bench_concurrency.py``,
+  setting ``restore``).
+
+Only that library is limited (scipy's OpenBLAS, found by its file path; all BLAS libraries where scipy's cannot be
+told apart, as with one system OpenBLAS shared by numpy and scipy); numpy's own OpenBLAS, which polyjax does not
+factorise with, keeps the user's setting. The user's scipy calls in the same process run with the limit too, once
+polyjax has made its first call: ``POLYJAX_LAPACK_THREADS=off`` leaves every library as it is, ``=N`` gives ``N``
+threads, and ``with pj.lapack_threads(n):`` sets a count for a block and puts the previous one back after it
+(polyjax's calls inside the block then leave the block's count alone).
 """
 
 from __future__ import annotations
 
 import functools
 import os
+import sys
 import threading
 
-import jax
 from threadpoolctl import ThreadpoolController
 
 from ._errors import InputError
 
 #: the environment variable: "1" (default), an integer, or "off"
 THREADS_ENV = "POLYJAX_LAPACK_THREADS"
+#: the module whose loading loads jaxlib's LAPACK library (jaxlib.lapack's ``initialize`` imports it)
+_LAPACK_MODULE = "scipy.linalg.cython_lapack"
 
 _LOCK = threading.RLock()
-_STATE = {"depth": 0, "saved": None, "controller": None}
+_STATE = {"depth": 0, "saved": None, "libraries": None}
 
 
 def configured_threads() -> int | None:
@@ -50,23 +59,59 @@ def configured_threads() -> int | None:
     return int(text)
 
 
-def _libraries():
-    """The BLAS libraries of the process, found once, after scipy's LAPACK (jaxlib's) has been loaded."""
-    if _STATE["controller"] is None:
-        # jaxlib loads scipy's LAPACK on its first factorisation (jaxlib.lapack's initialize); load it now so that
-        # its OpenBLAS is among the libraries limited (0.15 s, paid once, and by jaxlib's first call anyway)
-        from scipy.linalg import cython_lapack  # noqa: F401
+def _load_lapack(n: int) -> None:
+    """Load jaxlib's LAPACK library (scipy's) with OpenBLAS reading ``n`` threads at its start, if not loaded yet.
 
-        _STATE["controller"] = ThreadpoolController().select(user_api="blas").lib_controllers
-    return _STATE["controller"]
+    OpenBLAS reads ``OPENBLAS_NUM_THREADS`` once, when it is loaded, and starts that many threads less one; the
+    variable is put back right after, so subprocesses and other libraries see the user's environment."""
+    if _LAPACK_MODULE in sys.modules:
+        return
+    saved = os.environ.get("OPENBLAS_NUM_THREADS")
+    os.environ["OPENBLAS_NUM_THREADS"] = str(n)
+    try:
+        from scipy.linalg import cython_lapack  # noqa: F401 - loading it is the point
+    finally:
+        if saved is None:
+            os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        else:
+            os.environ["OPENBLAS_NUM_THREADS"] = saved
+
+
+def _libraries(n: int):
+    """The BLAS libraries limited: scipy's OpenBLAS, loaded first with ``n`` threads (all BLAS libraries where no
+    loaded one's path names scipy)."""
+    if _STATE["libraries"] is None:
+        _load_lapack(n)
+        blas = ThreadpoolController().select(user_api="blas").lib_controllers
+        # a scipy wheel keeps its OpenBLAS in ``scipy.libs/`` (numpy's wheel in ``numpy.libs/``)
+        scipy_own = [lib for lib in blas if os.path.basename(os.path.dirname(lib.filepath)).startswith("scipy")]
+        _STATE["libraries"] = scipy_own or blas
+    return _STATE["libraries"]
+
+
+def limit_lapack_threads() -> None:
+    """Set jaxlib's LAPACK library to ``$POLYJAX_LAPACK_THREADS`` threads (default 1) and leave it there.
+
+    Does nothing with ``off``, inside a :class:`lapack_threads` block (the block's count holds) and when the
+    count is already the limit (a change wakes OpenBLAS's threads: the module's docstring)."""
+    n = configured_threads()
+    if n is None:
+        return
+    with _LOCK:
+        if _STATE["depth"]:
+            return
+        for lib in _libraries(n):
+            if lib.num_threads != n:
+                lib.set_num_threads(n)
 
 
 class lapack_threads:
-    """Within the block, the process's BLAS/LAPACK libraries run ``n`` threads; their counts are put back after.
+    """Within the block, jaxlib's LAPACK library runs ``n`` threads; its previous count is put back after.
 
-    Re-entrant and shared by Python threads (the thread count is a process-wide setting of each library): the
-    outermost block sets and restores it. The caller's results should be ready before the block ends (the
-    functions polyjax wraps wait for theirs).
+    Re-entrant and shared by Python threads (the thread count is a process-wide setting of the library): the
+    outermost block sets and restores it, and polyjax's own calls inside leave it alone. The caller's results
+    should be ready before the block ends (JAX dispatches asynchronously; OpenBLAS reads its count when a kernel
+    starts).
 
     Args:
         n: threads; default ``$POLYJAX_LAPACK_THREADS`` (1 unless set; ``off`` makes the block do nothing).
@@ -82,7 +127,7 @@ class lapack_threads:
         with _LOCK:
             _STATE["depth"] += 1
             if _STATE["depth"] == 1 and n is not None:
-                libs = _libraries()
+                libs = _libraries(n)
                 _STATE["saved"] = [(lib, lib.num_threads) for lib in libs]
                 for lib in libs:
                     lib.set_num_threads(n)
@@ -98,20 +143,14 @@ class lapack_threads:
         return False
 
 
-def _wait(out):
-    """Block until the concrete JAX arrays of ``out`` are computed (tracers and other leaves pass)."""
-    for leaf in jax.tree.leaves(out):
-        if isinstance(leaf, jax.Array) and not isinstance(leaf, jax.core.Tracer):
-            leaf.block_until_ready()
-    return out
-
-
 def one_lapack_thread(fn):
-    """Decorate a public function: it runs inside :class:`lapack_threads` and waits for its results."""
+    """Decorate a public function that factorises: :func:`limit_lapack_threads` before it runs.
+
+    Under a JAX trace the limit is set while tracing, so the compiled program runs with it too."""
 
     @functools.wraps(fn)
     def wrapped(*args, **kwargs):
-        with lapack_threads():
-            return _wait(fn(*args, **kwargs))
+        limit_lapack_threads()
+        return fn(*args, **kwargs)
 
     return wrapped
