@@ -71,6 +71,7 @@ os.environ["POLYJAX_CACHE"] = os.environ.get(_RUN_CACHE_ENV, "off")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import pytest  # noqa: E402
+from _tiers import SLOW_TESTS  # noqa: E402
 
 from polyjax import DATA_ENV, has_data_root  # noqa: E402
 
@@ -175,10 +176,14 @@ def _file_rank(its) -> tuple:
     return -FILE_SECONDS.get(name, UNMEASURED_SECONDS), -len(its)
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest's own ``-m`` selection reads the markers
 def pytest_collection_modifyitems(config, items):
-    """The longest files first (:data:`FILE_SECONDS`; xdist hands whole files to its workers in this order,
-    ``--no-loadscope-reorder``, so the longest do not start last); without a data root, skip the data tests (a
-    failure in CI)."""
+    """The slow tier marked (:data:`_tiers.SLOW_TESTS`); the longest files first (:data:`FILE_SECONDS`; xdist hands
+    whole files to its workers in this order, ``--no-loadscope-reorder``, so the longest do not start last); without
+    a data root, skip the data tests (a failure in CI)."""
+    for item in items:
+        if f"{item.nodeid.split('::')[0].rsplit('/', 1)[-1]}::{item.name}" in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
     files: dict[str, list] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)

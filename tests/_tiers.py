@@ -1,0 +1,125 @@
+"""The slow tier: the tests that README's command leaves out and ``python -m pytest -q -m slow`` runs (CI runs both).
+
+Every test that took over 5 seconds in one full run of the suite (2-core machine, 2026-12-01, the other core partly
+busy; times below), besides those decorated ``@pytest.mark.slow`` in their files. Mostly the first test of a file to
+compile a program (its followers then share it), finite-difference derivative checks, fits of whole measured data
+sets, subprocesses of the command line and several processes at once. ``tests/conftest.py`` marks them at collection.
+"""
+# ruff: noqa: E501 - one test id a line, however long, so that the list reads as the suite names them
+
+SLOW_TESTS = frozenset({
+    "test_baselines.py::test_curet_no_worse_than_scipy_and_backends_agree",  # 12 s
+    "test_baselines.py::test_noise_free_data_fitted_back[ashikhmin-shirley]",  # 7 s
+    "test_baselines.py::test_noise_free_data_fitted_back[blinn-phong]",  # 5 s
+    "test_baselines.py::test_noise_free_data_fitted_back[cook-torrance]",  # 5 s
+    "test_baselines.py::test_noise_free_data_fitted_back[ward-anisotropic]",  # 6 s
+    "test_blender.py::test_blender_renders_the_glb_as_the_gltf_brdf[1.0-0.4-colour0-55.0]",  # 7 s
+    "test_cli.py::test_main_job_runs_on_synthetic_default_and_says_so",  # 7 s
+    "test_cli_usability.py::test_fit_rows_one_per_material_and_channel_labelled_as_such",  # 7 s
+    "test_compiled_programs.py::test_model_evaluation_and_selection_are_one_program_each",  # 12 s
+    "test_data_merl.py::test_loaders_return_one_mask_row_when_every_lane_has_the_same_valid_bins",  # 8 s
+    "test_data_nbrdf.py::test_call_masks_clamps_jits_and_vmaps",  # 9 s
+    "test_data_nbrdf.py::test_fit_on_all_valid_merl_bins",  # 15 s
+    "test_data_nbrdf.py::test_yellow_plastic_statistics",  # 5 s
+    "test_data_rgl.py::test_export_to_merl_round_trip",  # 12 s
+    "test_data_rgl.py::test_jit_vmap_and_below_horizon",  # 6 s
+    "test_data_rgl.py::test_merl_grid_subsample_and_spec",  # 7 s
+    "test_export.py::test_cli_export_every_format",  # 5 s
+    "test_export_materialx_usd.py::test_materialx_file_validates_and_describes_the_fit",  # 15 s
+    "test_export_standard_cli.py::test_export_mitsuba_xml_of_measured_data",  # 20 s
+    "test_fit_images.py::test_excluded_pixels_saturated_nonfinite_off_object",  # 6 s
+    "test_fit_images.py::test_light_samples_render_like_the_renderer",  # 22 s
+    "test_fit_images.py::test_neural_merl_from_images_close_to_direct_fit",  # 13 s
+    "test_fit_images.py::test_refit_of_rendered_polynomial_recovers_coefficients[mixed]",  # 26 s
+    "test_fit_images.py::test_refit_of_rendered_polynomial_recovers_coefficients[point]",  # 17 s
+    "test_fit_images.py::test_shadowed_pixels_excluded",  # 5 s
+    "test_fit_images_baselines.py::test_cook_torrance_sphere_recovered",  # 8 s
+    "test_fit_images_baselines.py::test_several_light_samples_derivatives_match_finite_differences[environment]",  # 15 s
+    "test_fit_images_baselines.py::test_several_light_samples_derivatives_match_finite_differences[two lights]",  # 15 s
+    "test_fit_images_baselines.py::test_several_light_samples_recovered[environment]",  # 9 s
+    "test_fit_images_baselines.py::test_several_light_samples_recovered[two lights]",  # 9 s
+    "test_fit_images_cli.py::test_fit_images_command_recovers_the_api_fit",  # 12 s
+    "test_grad_baselines.py::test_grad_under_jit_and_vmap_with_masks",  # 22 s
+    "test_grad_baselines.py::test_jvp_and_grad_match_finite_differences[cook-torrance-which1]",  # 36 s
+    "test_grad_baselines.py::test_jvp_and_grad_match_finite_differences[ward-which0]",  # 26 s
+    "test_grad_render.py::test_environment_texels_fixed_pool",  # 12 s
+    "test_grad_render.py::test_environment_with_shadows_and_indirect",  # 17 s
+    "test_grad_render.py::test_polynomial_coefficients_point_and_directional",  # 7 s
+    "test_inputs.py::test_nan_values_error_by_default_and_mask_on_request",  # 16 s
+    "test_latency.py::test_cli_cache_is_hit_by_a_second_process",  # 13 s
+    "test_latency.py::test_fit_command_parser_leaves_the_other_commands_unimported",  # 6 s
+    "test_latency.py::test_streamed_fit_equals_dense_fit[ashikhmin-shirley-4-auto]",  # 6 s
+    "test_latency.py::test_streamed_fit_equals_dense_fit[lafortune-degree0-auto]",  # 5 s
+    "test_latency.py::test_streamed_fit_of_a_nearly_exact_polynomial_takes_the_refining_pass",  # 7 s
+    "test_lstsq.py::test_several_fits_in_one_jit_do_not_deadlock",  # 8 s
+    "test_mitsuba.py::test_fit_from_mitsuba_images_renders_held_out_light",  # 10 s
+    "test_mitsuba.py::test_roughplastic_brdf_equals_mitsuba_eval",  # 9 s
+    "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts0]",  # 5 s
+    "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts1]",  # 9 s
+    "test_published.py::test_fit_recovers_synthetic_data[sgd]",  # 10 s
+    "test_render.py::test_force_all_effects_gives_identical_pixels",  # 6 s
+    "test_render.py::test_tabulated_brdf_is_reciprocal_and_interpolates",  # 10 s
+    "test_render_cli.py::test_render_command_writes_grid_and_psnr",  # 14 s
+    "test_render_mis.py::test_brdf_sampled_indirect_bounces_agree_with_cosine_bounces",  # 14 s
+    "test_render_mis.py::test_gradient_through_mis_environment_render_wrt_coefficients",  # 18 s
+    "test_render_mis.py::test_mis_with_shadows_and_a_plane",  # 13 s
+    "test_render_mis.py::test_modes_agree_and_mis_beats_cosine_on_a_glossy_sphere",  # 17 s
+    "test_reproduce.py::test_reproduce_quick",  # 84 s
+    "test_robust_data.py::test_all_zero_and_constant_materials_fitted_exactly",  # 7 s
+    "test_robust_data.py::test_cayman_lacquer_peak_650_beside_1e_minus_4_fits_finite_float32_close",  # 7 s
+    "test_robust_data.py::test_nan_and_inf_inside_values_error_names_the_argument_or_are_masked",  # 8 s
+    "test_robust_data.py::test_nan_under_outer_jit_flags_nonfinite_values_lane_only",  # 7 s
+    "test_robust_degree.py::test_degree_15_green_latex_float32_within_factor_of_float64",  # 10 s
+    "test_robust_degree.py::test_degree_15_quarry_condition_reported_and_modest_float32_close_to_float64[ashikhmin-shirley]",  # 5 s
+    "test_robust_degree.py::test_float32_tall_merl_design_keeps_full_rank",  # 8 s
+    "test_robust_edge_inputs.py::test_component_constant_up_to_rounding_flagged_in_both_bases[ashikhmin-shirley]",  # 7 s
+    "test_robust_edge_inputs.py::test_component_constant_up_to_rounding_flagged_in_both_bases[lafortune-anisotropic]",  # 8 s
+    "test_robust_edge_inputs.py::test_component_constant_up_to_rounding_flagged_in_both_bases[lafortune]",  # 7 s
+    "test_robust_edge_inputs.py::test_half_precision_values_fitted_in_float32[float16]",  # 5 s
+    "test_robust_edge_inputs.py::test_models_scale_free_at_extreme_lengths",  # 6 s
+    "test_robust_edge_inputs.py::test_nan_under_outer_jit_flagged_whatever_the_mask[no mask]",  # 11 s
+    "test_robust_edge_inputs.py::test_nonfinite_mask_under_outer_jit_drops_the_sample",  # 5 s
+    "test_robust_geometry.py::test_every_baseline_finite_at_degenerate_directions_through_the_fitted_model[openpbr-coat]",  # 7 s
+    "test_robust_geometry.py::test_polynomial_finite_at_degenerate_directions_and_zero_below_horizon[ashikhmin-shirley]",  # 9 s
+    "test_robust_geometry.py::test_polynomial_finite_at_degenerate_directions_and_zero_below_horizon[rusinkiewicz]",  # 5 s
+    "test_robust_optimizer.py::test_best_of_starts_never_picks_a_nan_or_inf_start",  # 11 s
+    "test_robust_optimizer.py::test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_stage_path[jaxopt-1]",  # 22 s
+    "test_robust_optimizer.py::test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_stage_path[optimistix-2]",  # 5 s
+    "test_robust_optimizer.py::test_curet_fits_at_range_limits_converge",  # 18 s
+    "test_robust_optimizer.py::test_far_start_and_step_limit_reported_as_max_steps",  # 6 s
+    "test_robust_optimizer.py::test_optimum_on_a_range_limit_converges_and_is_flagged[ashikhmin-shirley-params0-limit0]",  # 13 s
+    "test_robust_optimizer.py::test_optimum_on_a_range_limit_converges_and_is_flagged[cook-torrance-params1-limit1]",  # 9 s
+    "test_robust_properties.py::test_fit_invariant_to_sample_order",  # 7 s
+    "test_robust_properties.py::test_pca_rotation_and_signs_stable",  # 6 s
+    "test_robust_properties.py::test_symmetric_variable_sets_are_reciprocal",  # 17 s
+    "test_robust_rank.py::test_fewer_samples_than_parameters_flagged_minimum_norm_interpolant",  # 6 s
+    "test_robust_symmetry.py::test_reciprocal_at_any_pair_including_non_unit_and_below_horizon",  # 10 s
+    "test_saved_models.py::test_baseline_fit_saves_and_loads_like_a_polynomial_fit[.npz]",  # 14 s
+    "test_saved_models.py::test_fit_cli_fits_a_baseline_with_the_same_output_forms",  # 11 s
+    "test_saved_models.py::test_polyjax_does_not_import_baselines",  # 8 s
+    "test_saved_models.py::test_render_cli_model_fitted_to_other_materials_is_an_error",  # 19 s
+    "test_saved_models.py::test_renderer_never_emits_negative_radiance",  # 5 s
+    "test_scale.py::test_per_lane_directions_and_weights_any_block",  # 8 s
+    "test_scale.py::test_per_lane_directions_differentiate",  # 14 s
+    "test_scale.py::test_sharded_fit_on_8_devices",  # 14 s
+    "test_scale.py::test_two_process_distributed_fit_writes_its_shards",  # 17 s
+    "test_standard_models.py::test_joint_fit_derivative_matches_finite_differences",  # 13 s
+    "test_standard_models.py::test_joint_fit_recovers_parameters[gltf-pbr-1]",  # 8 s
+    "test_standard_models.py::test_joint_fit_recovers_parameters[principled-2]",  # 11 s
+    "test_standard_openpbr_usd.py::test_fit_derivative_matches_finite_differences",  # 8 s
+    "test_standard_openpbr_usd.py::test_grey_material_parameters_recovered[openpbr]",  # 26 s
+    "test_standard_openpbr_usd.py::test_grey_material_parameters_recovered[usd-preview]",  # 8 s
+    "test_stream_geometry.py::test_fit_after_a_kept_geometry_reuses_its_rows",  # 8 s
+    "test_stream_geometry.py::test_kept_geometry_is_loaded_and_gives_the_same_fit",  # 20 s
+    "test_stream_geometry.py::test_kept_geometry_is_not_used_when_its_inputs_differ",  # 13 s
+    "test_svbrdf.py::test_several_cameras_fit_differentiates",  # 8 s
+    "test_svbrdf.py::test_several_cameras_observations_and_relight",  # 5 s
+    "test_svbrdf.py::test_svbrdf_cli_cameras",  # 10 s
+    "test_svbrdf.py::test_texels_recover_their_material",  # 6 s
+    "test_tabulate.py::test_tabulate_baseline_fit_and_bad_input",  # 13 s
+    "test_tabulate.py::test_tabulate_is_differentiable_in_the_model",  # 5 s
+    "test_user_defects_2.py::test_readme_first_code_block_runs_as_written",  # 15 s
+    "test_view.py::test_environment_map_lights_the_sphere_by_quadrature",  # 6 s
+    "test_view.py::test_every_view_loads_offline_without_console_errors",  # 11 s
+    "test_view.py::test_report_html_is_a_page_of_the_reports_fits",  # 10 s
+})
