@@ -210,3 +210,15 @@ def test_diligent_ball_photographs_on_the_page(browser, data_root, tmp_path):  #
     assert shot.shape == (73, 73, 3) and psnr8(shot, expected) >= 45.0
     assert browser.evaluate("window.polyjaxView.points.n") == _page_data(out)["items"][0]["n"] > 2000
     assert browser.errors() == []
+
+
+def test_polynomials_the_export_does_not_write_are_tables():
+    d = pj.data.synthetic_default()
+    fit = pj.fit_polynomial(d.u, d.v, np.asarray(d.values)[0], "rusinkiewicz", 2)
+    (item,) = pj.view.as_items([("r", fit)], resolution=(4, 4, 8))
+    assert item.kind == "table" and item.info["variables"] == "rusinkiewicz"
+    assert "'rusinkiewicz' cannot be exported" in item.info["shown as"]
+    u, v, _, above = pj.data.merl_grid((4, 4, 8))
+    expected = np.where(above, np.maximum(np.asarray(fit(u, v)), 0.0), 0.0)
+    np.testing.assert_allclose(item.table[..., 0].ravel(), expected, rtol=1e-6, atol=1e-7)
+    assert item.fit_seconds is None and item.info["fit time"].startswith("not recorded")

@@ -142,7 +142,10 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | N
         if isinstance(lane, (PolynomialBRDF, NeuralBRDF)):
             info = _polynomial_info(lane) if isinstance(lane, PolynomialBRDF) else \
                 {"model": "neural BRDF (Sztrajman et al. 2021)", "name": getattr(lane, "name", "")}
-            item = ViewItem(label, "program", info, program=program(lane), model=lane)
+            try:
+                item = ViewItem(label, "program", info, program=program(lane), model=lane)
+            except InputError as e:  # variables the expression builder does not write (e.g. rusinkiewicz)
+                item = _tabulated(lane, label, resolution, info, str(e).removeprefix("model: "))
         elif callable(lane):
             item = _tabulated(lane, label, resolution)
         else:
@@ -152,14 +155,14 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | N
     return items
 
 
-def _tabulated(model, name: str, resolution) -> ViewItem:
+def _tabulated(model, name: str, resolution, info=None, why="no GLSL expression for this model") -> ViewItem:
     from ..export._merl import tabulate_merl
 
     values, _ = tabulate_merl(model, resolution)
     table = np.asarray(values, np.float32).T.reshape(*resolution, 3)
-    info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
-    info["shown as"] = (f"table: tabulated at the centres of the {'x'.join(map(str, resolution))} MERL bins "
-                        "(no GLSL expression for this model)")
+    if info is None:
+        info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
+    info["shown as"] = f"table: tabulated at the centres of the {'x'.join(map(str, resolution))} MERL bins ({why})"
     return ViewItem(name, "table", info, table=table, model=model)
 
 

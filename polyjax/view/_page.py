@@ -1,6 +1,7 @@
-r"""One self-contained HTML page: the template ``page.html`` with the viewer script ``viewer.js``, the items' GLSL
-(:mod:`polyjax.view._glsl`) and their data (JSON; tables as base64 float16, points as base64 float32) inlined.
-Nothing is fetched: no network, no CDN, no other file.
+r"""One self-contained HTML page: the template ``page.html`` with the scripts ``photos.js`` (a capture's
+photographs) and ``viewer.js``, the items' GLSL (:mod:`polyjax.view._glsl`) and their data (JSON; tables as base64
+float16, points, photographs and normals as base64 float32) inlined. Nothing is fetched: no network, no CDN, no
+other file.
 
 The page's sphere is :func:`polyjax.render.render`'s scene ``Scene(Camera(eye, target, up, fov_deg, size, size),
 [Sphere(brdf)], [PointLight(position, intensity)])`` with background 0, shaded per pixel centre exactly as the
