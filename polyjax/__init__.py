@@ -28,7 +28,7 @@ from ._geometry import (
 )
 from ._image_rows import ImageRows, image_rows
 from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
-from ._io import load_model, save_model
+from ._io import load_model, model_metadata, save_model
 from ._kinds import ModelKind, model_kinds, register_model_kind
 from ._logfit import fit_log_polynomial
 from ._lstsq import LstsqSolution, weighted_lstsq
@@ -73,5 +73,5 @@ __all__ = [
     "prepare_inputs", "psnr", "raise_on_status", "reflect", "register_model_kind", "register_variables", "render",
     "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "variable_sets", "weighted_lstsq",
     "THREADS_ENV", "lapack_threads", "one_lapack_thread", "view",
-    "Capture", "relight",
+    "Capture", "relight", "model_metadata",
 ]

@@ -134,7 +134,7 @@ def cmd_fit(args) -> int:
     model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, degree)
     out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed)
     if args.save:
-        out["saved"] = str(pj.save_model(args.save, model))
+        out["saved"] = str(pj.save_model(args.save, model, metadata={"fit_seconds": elapsed, "fit_command": "fit"}))
     if args.json:
         print(strict_json(out))
         return 0

@@ -34,7 +34,7 @@ POLYNOMIAL_KIND = register_model_kind(module_kind(
 ))
 
 
-def save_model(path: str | os.PathLike, model) -> Path:
+def save_model(path: str | os.PathLike, model, *, metadata: dict | None = None) -> Path:
     """Write a fitted model to ``path``: ``.json`` (text, exact float repr) or anything else as ``.npz``.
 
     Args:
@@ -42,13 +42,16 @@ def save_model(path: str | os.PathLike, model) -> Path:
             refused, never renamed). The file is written whole or not at all (a temporary file renamed).
         model: a :class:`polyjax.PolynomialBRDF` or any model whose class has a :class:`polyjax.ModelKind`
             (e.g. a ``baselines.BaselineFit``).
+        metadata: optional facts about the fit kept in the header's ``"metadata"`` (JSON values, e.g.
+            ``{"fit_seconds": 1.2}`` written by ``polyjax fit --save``); :func:`model_metadata` reads them back.
+            Readers that do not know the key ignore it.
 
     Returns:
         The path written. A polynomial model's variable set is stored by name: a user-registered set must be
         registered again before loading.
 
     Raises:
-        InputError: a suffix other than ``.npz`` / ``.json``.
+        InputError: a suffix other than ``.npz`` / ``.json``, metadata that is not a dict of JSON values.
     """
     path = Path(path)
     if path.suffix not in (".npz", ".json"):
@@ -57,6 +60,8 @@ def save_model(path: str | os.PathLike, model) -> Path:
     kind = kind_of(model)
     static, arrays = kind.to_arrays(model)
     meta = {"format": FORMAT, "version": VERSION, "kind": kind.kind, "static": static}
+    if metadata is not None:
+        meta["metadata"] = _checked_metadata(metadata)
     if path.suffix == ".json":
         doc = dict(meta)
         doc["arrays"] = {
@@ -68,6 +73,41 @@ def save_model(path: str | os.PathLike, model) -> Path:
     else:
         _write_whole(path, lambda f: np.savez(f, __meta__=np.asarray(json.dumps(meta)), **arrays))
     return path
+
+
+def _checked_metadata(metadata) -> dict:
+    """``metadata`` as strict JSON (a dict with string keys, finite numbers), else an InputError."""
+    if not isinstance(metadata, dict) or not all(isinstance(k, str) for k in metadata):
+        raise InputError(f"metadata: expected a dict with string keys, found {type(metadata).__name__}")
+    try:
+        return json.loads(json.dumps(metadata, allow_nan=False))
+    except (TypeError, ValueError) as e:
+        raise InputError(f"metadata: expected JSON values (finite numbers, strings, lists, dicts): {e}") from None
+
+
+def model_metadata(path: str | os.PathLike) -> dict:
+    """The ``metadata`` dict a model file was saved with (:func:`save_model`); ``{}`` when it has none (older
+    files, models saved without it). Reads the header only.
+
+    Raises:
+        DataNotFoundError: no such file. DataFormatError: not a saved model.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataNotFoundError(f"{str(path)!r}: no such model file")
+    try:
+        if path.suffix == ".json":
+            meta = json.loads(path.read_text())
+        else:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["__meta__"]))
+    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
+        raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
+    if not isinstance(meta, dict) or meta.get("format") not in (FORMAT, FORMAT_V1):
+        raise DataFormatError(path, f"format {FORMAT!r} (or {FORMAT_V1!r})", repr(meta.get("format") if
+                                                                                  isinstance(meta, dict) else meta))
+    found = meta.get("metadata", {})
+    return dict(found) if isinstance(found, dict) else {}
 
 
 def _json_float(x):

@@ -230,6 +230,8 @@ def test_fit_photos_and_relight_command_line(synthetic, tmp_path, capsys):
     assert main(["--no-cache", "fit-photos", str(folder), "--lights", "0:8:2", "--variables", "lafortune",
                  "--degree", "2", "--save", str(model)]) == 0
     assert model.is_file()
+    meta = pj.model_metadata(model)  # the fit's time, as printed, kept in the file
+    assert meta["fit_command"] == "fit-photos" and f"({meta['fit_seconds']:.2f} s)" in capsys.readouterr().out
     assert main(["--no-cache", "fit-photos", str(folder), "--save", str(tmp_path / "none" / "m.npz")]) == 2
     out = tmp_path / "relit"
     capsys.readouterr()

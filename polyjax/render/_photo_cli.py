@@ -108,7 +108,7 @@ def run_fit_photos(args) -> int:
         weighting=args.weighting, robust_steps=args.robust_steps)
     seconds = time.perf_counter() - t0
     status = [pj.FitStatus(int(s)).name for s in np.asarray(model.status)]
-    pj.save_model(save, model)
+    pj.save_model(save, model, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
     out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
            "degree": args.degree, "interactions": bool(args.interactions), "link": args.link,
            "weighting": args.weighting, "robust_steps": args.robust_steps, "status_rgb": status,

@@ -27,8 +27,9 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
                        "the lobe in the plane of incidence, the (theta_h, theta_d) slice, the albedo, two items side "
                        "by side with their error image, and each fit's numbers.")
     p.add_argument("items", nargs="+", metavar="FIT_OR_DATA",
-                   help="a model saved by `polyjax fit --save` (.npz or .json; FILE#i for lane i) or a data set spec "
-                   "(curet:25, merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>)")
+                   help="a model saved by `polyjax fit --save` (.npz or .json; FILE#i for lane i), a photometric "
+                   "capture's folder in DiLiGenT's layout, or a data set spec (curet:25, merl-nbrdf:green-latex, "
+                   "cornell:cayman, merl:<file.binary>, rgl:<file.bsdf>)")
     p.add_argument("--out", default="polyjax-view.html", help="the page to write (default polyjax-view.html)")
     p.add_argument("--serve", action="store_true",
                    help="then serve it on http://127.0.0.1:PORT/ (loopback only) until Ctrl-C")
@@ -38,6 +39,9 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--environment", default=None, metavar="sky|FILE.exr",
                    help="also light the sphere with an environment map: the built-in sky or a latitude-longitude "
                    "OpenEXR map (averaged down to 16 x 32 texels)")
+    p.add_argument("--lights", default=None,
+                   help="0-based lines of filenames.txt to load from capture folders, e.g. 0,2,4 or 0:48:4 "
+                   "(default: all)")
     p.add_argument("--table-resolution", default="90,90,180",
                    help="MERL-grid bins N_h,N_d,N_p of tables: tabulated models and binned dense data "
                    "(default 90,90,180, MERL's own grid; smaller: a smaller page)")
@@ -47,17 +51,19 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
 
 def run_view(args) -> int:
     from .._outputs import check_output_file
+    from ..render._photo_cli import parse_lights
     from ._page import ViewSettings, write_page
     from ._serve import serve_page
 
     out = check_output_file(args.out, "--out")
+    lights = parse_lights(args.lights)
     if args.serve and not 0 <= args.port <= 65535:  # checked before any work
         from .._errors import InputError
 
         raise InputError(f"--port: expected 0 (any free port) or a port in [1, 65535], found {args.port}")
     settings = ViewSettings(size=args.size, exposure=args.exposure, environment=args.environment)
     write_page(args.items, out, settings=settings, resolution=_resolution(args.table_resolution),
-               root=getattr(args, "data_root", None))
+               root=getattr(args, "data_root", None), lights=lights)
     print(f"wrote {out}", flush=True)
     if args.serve:
         serve_page(out, args.port)

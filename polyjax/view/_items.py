@@ -46,6 +46,9 @@ class ViewItem:
         table: float32 ``(N_h, N_d, N_p, 3)`` BRDF values in 1/sr (kind ``"table"``).
         u, v, values: float32 ``(n, 3)``, ``(n, 3)``, ``(n, 3)`` samples (kind ``"points"``).
         model: the Python model, kept for callers that compare with the page (not written into it).
+        capture: the :class:`polyjax.Capture` whose photographs the page shows (a capture's ``"points"`` item,
+            :mod:`polyjax.view._capture`).
+        fit_seconds: a fit's time as saved with the model (:func:`fit_time`); None when not recorded.
     """
 
     name: str
@@ -57,6 +60,8 @@ class ViewItem:
     v: np.ndarray | None = None
     values: np.ndarray | None = None
     model: object = None
+    capture: object = None
+    fit_seconds: float | None = None
 
 
 def _lanes(obj, what: str) -> list[tuple[str, object]]:
@@ -100,33 +105,64 @@ def _fit_info(model) -> dict:
     return info
 
 
-def model_items(model, name: str, resolution=MERL_RESOLUTION) -> list[ViewItem]:
-    """The items of a fitted model: programs for what the expression builder covers, tables otherwise."""
+def fit_time(metadata: dict | None) -> tuple[str, float | None]:
+    """``(text, seconds or None)`` of the fit time a model file keeps (:func:`polyjax.model_metadata`:
+    ``fit_seconds``, written by ``polyjax fit --save`` and ``polyjax fit-photos --save``, compilation included);
+    "not recorded" when it keeps none (older files, models saved from Python or never saved)."""
+    seconds = (metadata or {}).get("fit_seconds")
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not np.isfinite(seconds) or seconds < 0:
+        return "not recorded (the model was not saved with its fit time)", None
+    command = (metadata or {}).get("fit_command", "fit")
+    return f"{seconds:.3f} s (polyjax {command}, compilation included)", float(seconds)
+
+
+def _with_fit_time(info: dict, text: str) -> dict:
+    """``info`` with the row ``"fit time"`` after ``"L2"`` (at the end when there is none)."""
+    out = {}
+    for key, value in info.items():
+        out[key] = value
+        if key == "L2":
+            out["fit time"] = text
+    out.setdefault("fit time", text)
+    return out
+
+
+def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | None = None) -> list[ViewItem]:
+    """The items of a fitted model: programs for what the expression builder covers, tables otherwise; each with
+    the fit time of ``metadata`` (the model file's, :func:`fit_time`)."""
     from ..data._nbrdf import NeuralBRDF
     from ..export._expr import program
 
     items = []
-    for suffix, lane in _lanes(model, name):
+    lanes = _lanes(model, name)
+    text, seconds = fit_time(metadata)
+    text += " (all lanes of the file together)" if seconds is not None and len(lanes) > 1 else ""
+    for suffix, lane in lanes:
         label = name + suffix
         if isinstance(lane, (PolynomialBRDF, NeuralBRDF)):
             info = _polynomial_info(lane) if isinstance(lane, PolynomialBRDF) else \
                 {"model": "neural BRDF (Sztrajman et al. 2021)", "name": getattr(lane, "name", "")}
-            items.append(ViewItem(label, "program", info, program=program(lane), model=lane))
+            try:
+                item = ViewItem(label, "program", info, program=program(lane), model=lane)
+            except InputError as e:  # variables the expression builder does not write (e.g. rusinkiewicz)
+                item = _tabulated(lane, label, resolution, info, str(e).removeprefix("model: "))
         elif callable(lane):
-            items.append(_tabulated(lane, label, resolution))
+            item = _tabulated(lane, label, resolution)
         else:
             raise InputError(f"{name}: expected a fitted model (a callable f(u, v)), found {type(lane).__name__}")
+        item.info, item.fit_seconds = _with_fit_time(item.info, text), seconds
+        items.append(item)
     return items
 
 
-def _tabulated(model, name: str, resolution) -> ViewItem:
+def _tabulated(model, name: str, resolution, info=None, why="no GLSL expression for this model") -> ViewItem:
     from ..export._merl import tabulate_merl
 
     values, _ = tabulate_merl(model, resolution)
     table = np.asarray(values, np.float32).T.reshape(*resolution, 3)
-    info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
-    info["shown as"] = (f"table: tabulated at the centres of the {'x'.join(map(str, resolution))} MERL bins "
-                        "(no GLSL expression for this model)")
+    if info is None:
+        info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
+    info["shown as"] = f"table: tabulated at the centres of the {'x'.join(map(str, resolution))} MERL bins ({why})"
     return ViewItem(name, "table", info, table=table, model=model)
 
 
@@ -182,12 +218,20 @@ def data_items(data: Measurements, name: str, resolution=MERL_RESOLUTION) -> lis
     return items
 
 
-def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem]:
-    """The items of one command-line argument: a saved model file (``.npz``/``.json``, ``FILE#i`` for lane ``i``)
-    or a data set spec of :func:`polyjax.data.load` (``curet:25``, ``merl-nbrdf:green-latex``, ``cornell:cayman``,
-    ``merl:<file>``)."""
+def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION, lights=None) -> list[ViewItem]:
+    """The items of one command-line argument: a saved model file (``.npz``/``.json``, ``FILE#i`` for lane ``i``),
+    a photometric capture's folder in DiLiGenT's layout (:func:`polyjax.data.load_photometric` of its ``lights``,
+    None: all; :mod:`polyjax.view._capture`) or a data set spec of :func:`polyjax.data.load` (``curet:25``,
+    ``merl-nbrdf:green-latex``, ``cornell:cayman``, ``merl:<file>``, ``rgl:<file>``: :mod:`polyjax.view._rgl`)."""
     import polyjax as pj
 
+    from ._capture import capture_items
+    from ._rgl import rgl_items
+
+    if Path(arg).is_dir():
+        return capture_items(pj.data.load_photometric(arg, lights), Path(arg).name, source=f"capture {arg}")
+    if arg.strip().lower().startswith("rgl:"):
+        return rgl_items(arg, root, resolution)
     path, sep, index = arg.rpartition("#")
     path = path if sep else arg
     if Path(path).suffix.lower() in (".npz", ".json"):
@@ -200,23 +244,30 @@ def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION) -> list
             except (ValueError, IndexError, TypeError) as e:
                 raise InputError(f"{arg!r}: expected FILE#i with i a lane of the model's batch shape "
                                  f"{getattr(model, 'batch_shape', ())}") from e
-        return model_items(model, Path(path).stem + (f"[{index}]" if sep else ""), resolution)
+        return model_items(model, Path(path).stem + (f"[{index}]" if sep else ""), resolution,
+                           pj.model_metadata(path))
     if ":" not in arg:
-        raise InputError(f"{arg!r}: expected a saved model (.npz or .json) or a data set spec such as curet:25, "
-                         "merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>")
+        raise InputError(f"{arg!r}: expected a saved model (.npz or .json), a capture's folder or a data set spec "
+                         "such as curet:25, merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>, "
+                         "rgl:<file.bsdf>")
     return data_items(pj.data.load(arg, root=root), arg, resolution)
 
 
-def as_items(objects, resolution=MERL_RESOLUTION, root=None) -> list[ViewItem]:
-    """Items from a mix of :class:`ViewItem`, models, :class:`polyjax.Measurements`, ``(name, object)`` pairs and
-    command-line strings."""
+def as_items(objects, resolution=MERL_RESOLUTION, root=None, lights=None) -> list[ViewItem]:
+    """Items from a mix of :class:`ViewItem`, models, :class:`polyjax.Measurements`, :class:`polyjax.Capture`,
+    ``(name, object)`` pairs and command-line strings (``lights``: of the capture folders among them)."""
+    from .._capture import Capture
+    from ._capture import capture_items
+
     items = []
     for i, obj in enumerate(objects):
         name, obj = obj if isinstance(obj, tuple) and len(obj) == 2 and isinstance(obj[0], str) else (None, obj)
         if isinstance(obj, ViewItem):
             items.append(obj)
-        elif isinstance(obj, str):
-            items.extend(items_from_argument(obj, root, resolution))
+        elif isinstance(obj, (str, Path)):
+            items.extend(items_from_argument(str(obj), root, resolution, lights))
+        elif isinstance(obj, Capture):
+            items.extend(capture_items(obj, name or f"capture {i}"))
         elif isinstance(obj, Measurements):
             items.extend(data_items(obj, name or (obj.names[0] if len(obj.names) == 1 else f"data {i}"), resolution))
         else:

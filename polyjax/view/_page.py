@@ -1,6 +1,7 @@
-r"""One self-contained HTML page: the template ``page.html`` with the viewer script ``viewer.js``, the items' GLSL
-(:mod:`polyjax.view._glsl`) and their data (JSON; tables as base64 float16, points as base64 float32) inlined.
-Nothing is fetched: no network, no CDN, no other file.
+r"""One self-contained HTML page: the template ``page.html`` with the scripts ``photos.js`` (a capture's
+photographs) and ``viewer.js``, the items' GLSL (:mod:`polyjax.view._glsl`) and their data (JSON; tables as base64
+float16, points, photographs and normals as base64 float32) inlined. Nothing is fetched: no network, no CDN, no
+other file.
 
 The page's sphere is :func:`polyjax.render.render`'s scene ``Scene(Camera(eye, target, up, fov_deg, size, size),
 [Sphere(brdf)], [PointLight(position, intensity)])`` with background 0, shaded per pixel centre exactly as the
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InputError
+from ._capture import capture_json
 from ._environment import environment_json
 from ._glsl import brdf_functions
 from ._items import MERL_RESOLUTION, ViewItem, as_items
@@ -84,6 +86,10 @@ def _item_json(i: int, item: ViewItem) -> dict:
     elif item.kind == "points":
         out["n"] = int(item.u.shape[0])
         out["u"], out["v"], out["values"] = (_b64(a, np.float32) for a in (item.u, item.v, item.values))
+    if item.capture is not None:
+        out["capture"] = capture_json(item.capture)
+    if "fit time" in item.info:  # a model's item
+        out["fit_seconds"] = item.fit_seconds
     return out
 
 
@@ -103,14 +109,15 @@ def page_html(items: list[ViewItem], settings: ViewSettings = ViewSettings()) ->
         "TEXT": html.escape(settings.text),
         "DATA": json.dumps(data, allow_nan=False).replace("<", "\\u003c"),
         "GLSL": brdf_functions(items),
-        "SCRIPT": _template("viewer.js"),
+        "SCRIPT": _template("photos.js") + _template("viewer.js"),
     }
     return re.sub(r"__POLYJAX_([A-Z]+)__", lambda m: parts[m.group(1)], _template("page.html"))
 
 
 def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = ViewSettings(),
-               resolution=MERL_RESOLUTION, root=None) -> Path:
-    """Write the page of ``objects`` (fits, data sets, their file names or specs: :func:`as_items`) to ``path``.
+               resolution=MERL_RESOLUTION, root=None, lights=None) -> Path:
+    """Write the page of ``objects`` (fits, data sets, captures, their file names, folders or specs:
+    :func:`as_items`; ``lights``: the lights to load of capture folders, None for all) to ``path``.
 
     The text is built completely before the file is opened (no half-written page). Returns the path written.
     """
@@ -118,6 +125,6 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
 
     path = check_output_file(path, "out")
     _check_settings(settings)  # before the items' work
-    text = page_html(as_items(objects, resolution, root), settings)
+    text = page_html(as_items(objects, resolution, root, lights), settings)
     path.write_text(text, encoding="utf-8")
     return path

@@ -9,7 +9,7 @@
   const S = DATA.settings, ITEMS = DATA.items;
   const DEG = Math.PI / 180;
   const view = window.polyjaxView = { ready: false, error: null, frame: 0, state: {}, polar: null, albedo: null,
-                                      points: null, items: ITEMS.map((it) => it.name) };
+                                      points: null, photos: null, items: ITEMS.map((it) => it.name) };
   const $ = (id) => document.getElementById(id);
 
   function fail(msg) {
@@ -249,7 +249,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
   const L0 = S.light, R = Math.hypot(L0[0], L0[1], L0[2]);
   const init = { azimuth: Math.atan2(L0[0], L0[2]) / DEG, elevation: Math.asin(L0[1] / R) / DEG };
   const state = view.state = { azimuth: init.azimuth, elevation: init.elevation, radius: R, exposure: S.exposure,
-                               gain: 4, incidence: 45, itemA: 0, itemB: -1, light: null,
+                               gain: 4, incidence: 45, itemA: 0, itemB: -1, light: null, photoLight: 0,
                                environment: !!DATA.environment };
   const isFn = (k) => k >= 0 && ITEMS[k].kind !== "points";
 
@@ -280,6 +280,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     const env = $("environment");
     env.checked = state.environment; env.parentElement.hidden = !DATA.environment;
     env.addEventListener("change", () => { state.environment = env.checked; schedule(); });
+    $("photoLight").addEventListener("input", () => schedule());
     $("resetLight").addEventListener("click", () => { state.azimuth = init.azimuth; state.elevation = init.elevation; schedule(); });
     let drag = null;
     ["sphereA", "sphereB", "sphereErr"].forEach((id) => {
@@ -444,11 +445,19 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     info("infoA", a); info("infoB", b === a ? -1 : b);
   }
 
+  let photos = null;
+  function drawPhotos() {  // a capture as A or B: its photographs, relit by the other item when that is a function
+    const a = state.itemA, b = state.itemB, cap = ITEMS[a].capture ? a : (b >= 0 && ITEMS[b].capture ? b : -1);
+    $("photoView").hidden = cap < 0;
+    view.photos = cap < 0 ? null : photos.draw(cap, floatTargets ? (cap === a ? b : a) : -1);
+  }
+
   function redraw() {
     pending = false;
     try {
       drawSpheres();
       if (plotsDirty) { drawPlots(); plotsDirty = false; }
+      drawPhotos();
       view.frame += 1;
       view.ready = true;
     } catch (e) {
@@ -460,6 +469,11 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
     uploadTables();
     uploadEnvironment();
     progs = { sphere: program(SPHERE), slice: program(SLICE), evaluate: program(EVAL) };
+    photos = polyjaxPhotos({ ITEMS, S, state, evaluate, bytes, $ });
+    // item k at directions u, v (flat arrays of 3n numbers) on the GPU, as the views evaluate it: (n, 3) values
+    view.evaluate = (k, u, v) => { const f = evaluate(k, Float32Array.from(u), Float32Array.from(v)), out = [];
+      for (let i = 0; i < f.length / 4; i++) out.push([f[4 * i], f[4 * i + 1], f[4 * i + 2]]);
+      return out; };
     if (!floatTargets) fail("This browser's WebGL2 cannot render to float textures (EXT_color_buffer_float): the plots are off.");
     setupControls();
     $("textView").hidden = !$("text").textContent.trim();

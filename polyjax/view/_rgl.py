@@ -1,0 +1,35 @@
+r"""An RGL-EPFL measured BSDF (``rgl:<file or name>``, :func:`polyjax.data.load_rgl`) on the page.
+
+The file is a BRDF that evaluates anywhere, not a set of fixed samples: the page's table gets its values at the
+centres of the table's own bins, ``pj.data.load("rgl:...", directions=...)`` at the directions of
+:func:`polyjax.data.merl_grid` of the table's resolution (both above the horizon; 0 elsewhere), one sample per bin.
+A coarse table is thus the BRDF at its bin centres, not an average of a finer grid's.
+"""
+
+from __future__ import annotations
+
+from .._errors import InputError
+from ._items import MERL_RESOLUTION, ViewItem
+
+
+def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem]:
+    """The item of an ``rgl:`` spec: a table of the measured BSDF at the bin centres, bin ``i`` holding the value
+    at direction pair ``i`` of :func:`polyjax.data.merl_grid` (not binned again: at ``theta_h = theta_d = 0``
+    every ``phi_d`` bin has the same directions)."""
+    import numpy as np
+
+    import polyjax as pj
+
+    resolution = tuple(int(n) for n in resolution)
+    u, v, _, above = pj.data.merl_grid(resolution)
+    data = pj.data.load(spec, root=root, directions=(u[above], v[above]))
+    if len(data.channels) != 3:
+        raise InputError(f"{spec!r}: a spectral file ({len(data.channels)} wavelengths); the page shows RGB: use "
+                         "the material's *_rgb.bsdf file")
+    table = np.zeros((above.size, 3), np.float32)
+    table[above] = np.where(np.asarray(data.mask)[:, None], np.asarray(data.values).T, 0.0)
+    info = {"model": "measured data", "source": data.source, "samples": int(np.asarray(data.mask).sum()),
+            "channels": list(data.channels),
+            "shown as": (f"table: the measured BSDF evaluated at the centres of the {'x'.join(map(str, resolution))} "
+                         "MERL bins above the horizon")}
+    return [ViewItem(data.names[0], "table", info, table=table.reshape(*resolution, 3), model=data)]
