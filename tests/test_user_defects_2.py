@@ -365,6 +365,33 @@ def test_long_work_shows_an_elapsed_time_line_on_a_terminal_only(monkeypatch):
     assert quick.text == ""
 
 
+def test_progress_line_names_the_stage(monkeypatch):
+    """The line's stage follows JAX's own events: after a real compile of a new program, ``running``; after a
+    trace (or lowering) event, ``compiling`` with the programs ready since the block began; and the line shows it."""
+    import time
+
+    import jax.monitoring
+
+    from polyjax import _progress
+
+    _progress._listen()
+    ready = _progress._EVENTS["ready"]
+    jax.jit(lambda x: x * 3.0 + 0.25)(np.arange(7.0))  # a program no test compiled: traced, lowered, compiled
+    assert _progress._EVENTS["ready"] >= ready + 1
+    assert _progress.stage(ready) == "running"
+    jax.monitoring.record_event_duration_secs("/jax/core/compile/jaxpr_trace_duration", 0.01)
+    k = _progress._EVENTS["ready"] - ready
+    assert _progress.stage(ready) == f"compiling ({k} program{'' if k == 1 else 's'} ready)"
+    assert _progress.stage(_progress._EVENTS["ready"]) == "compiling (0 programs ready)"
+    monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
+    term = _Terminal()
+    with _progress.progress_line("fitting ward", after=0.0, interval=0.05, stream=term):
+        jax.monitoring.record_event_duration_secs("/jax/core/compile/backend_compile_duration", 0.01)
+        time.sleep(0.2)  # the line is written at once (after=0): a moment for its thread to start
+    assert "\rpolyjax: fitting ward: 0 s, running\033[K" in term.text
+    assert _progress.stage(ready) == "running"
+
+
 def test_cache_info_and_clear_commands(capsys, tmp_path):
     folder = tmp_path / "cache"
     (folder / "polyjax-programs").mkdir(parents=True)
