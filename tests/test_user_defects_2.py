@@ -256,6 +256,33 @@ def test_svbrdf_zero_lights_names_the_flag(capsys, tmp_path):
     assert " k" not in line.split("error:")[1]
 
 
+@pytest.mark.data
+def test_svbrdf_warns_when_texel_fits_are_not_ok(capsys, tmp_path, monkeypatch):
+    """Texels whose fits are not OK (here one channel of one texel marked RANK_DEFICIENT after the fit, as a texel
+    with too few lit samples gets) are reported: the summary's WARNING line with the count, and in --json the count
+    and the warning."""
+    import equinox as eqx
+
+    from polyjax import svbrdf
+
+    fit_rows = svbrdf.fit_rows_distributed
+
+    def one_not_ok(*args, **kwargs):
+        model = fit_rows(*args, **kwargs)
+        status = np.array(model.status)
+        status[1, 0, 2] = pj.Result.RANK_DEFICIENT
+        return eqx.tree_at(lambda m: m.status, model, jax.device_put(status, model.status.sharding))
+
+    monkeypatch.setattr(svbrdf, "fit_rows_distributed", one_not_ok)
+    args = ["svbrdf", "--size", "2", "--lights", "8", "--degree", "1", "--format", "npz"]
+    assert main(args + ["--out", str(tmp_path / "text")]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: 1 of 12 texel fits here are not OK" in out and "for degree 1" in out.split("WARNING")[1]
+    assert main(args + ["--out", str(tmp_path / "json"), "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["not_ok_local"] == 1 and rec["warnings"] == ["1 texel fits not OK"]
+
+
 # ---------------------------------------------------------------- 15: conditioning with interactions
 @pytest.mark.data
 def test_interactions_p7_on_curet_25_is_reported_ill_conditioned_in_both_bases(capsys, data_root):
