@@ -6,8 +6,10 @@ seconds, most of a warm first fit. So, as :mod:`polyjax._aot` does for ``polyjax
 inputs (input preparation, the kernel, the kept optimum and the result codes) is one jitted program, compiled ahead
 of time and serialised (:mod:`jax.experimental.serialize_executable`) into ``<cache folder>/polyjax-programs/``, keyed
 the way :mod:`polyjax._aot` keys its programs: the input shapes and dtypes (and which are None), every option of the
-fit, the versions of JAX and jaxlib, the machine, float64 on or off, and the source files of polyjax and baselines
-(their sizes and modification times). A later process with the same key loads the executable and runs it.
+fit, the versions of JAX and jaxlib, the machine and its device kind, float64 on or off, XLA's options, and the
+source files of polyjax and baselines (their sizes and modification times). A later process with the same key loads
+the executable and runs it; within a process the last 16 executables stay loaded, and :func:`loads_ahead` starts
+reading a call's file before the call sets LAPACK up.
 
 It is on whenever JAX's persistent compilation cache is (:func:`polyjax.enable_compilation_cache`, on by default in
 the command line), and off with ``POLYJAX_SAVED_PROGRAMS=off`` or ``POLYJAX_CACHE=off``. The program takes the
@@ -16,7 +18,8 @@ the eager call's result too: concrete inputs (not under ``jit``, ``grad`` or ``v
 directions, values, weights and starts, non-negative weights (an eager call raises where a traced one flags the
 lane). Elsewhere the ordinary call runs, silently. A saved program that cannot be read, compiled, written or run is
 reported once per process and kind of failure as a :class:`SavedProgramWarning` with its reason, then the fit goes
-on without it (a file that cannot be read is compiled and written again).
+on without it (a file that cannot be read is compiled and written again). The key knows the source files, not
+functions replaced at run time: a process that patches baselines' internals turns saved programs off.
 """
 
 from __future__ import annotations
@@ -163,8 +166,9 @@ def _load(path: Path):
 
 def _path(folder: Path, name: str, arrays, options: dict) -> Path:
     """The file of the program of model ``name`` for ``arrays`` (the inputs and the key) and ``options``."""
+    device = jax.devices()[0]
     opts = dict(options, baselines_source=_stamp(), model=name, given="".join("01"[a is not None] for a in arrays),
-                compiler=sorted(COMPILER_OPTIONS.items()))
+                compiler=sorted(COMPILER_OPTIONS.items()), device=f"{device.platform}:{device.device_kind}")
     return folder / f"baseline-{_key([a for a in arrays if a is not None], opts)}.bin"
 
 
