@@ -1,4 +1,4 @@
-"""Latency a user feels: the first nonlinear fit in a fresh process (issue "trace less"), timed from outside.
+"""Latency a user feels: the first nonlinear fit in a fresh process, timed from outside.
 
 For each of the 7 nonlinear models of the paper, on one CUReT material (sample 25) from 16 starts, fresh Python
 processes, one after the other, in one run:
@@ -173,7 +173,8 @@ def main(argv=None):
     ap.add_argument("--no-jax-cache-row", action="store_true", help="skip the warm run from JAX's cache alone")
     args = ap.parse_args(argv)
     print("first baselines.fit in a fresh process, CUReT sample 25, 16 starts; seconds (wall = whole process; "
-          "after import = in the process after import polyjax)")
+          "after import = in the process after import polyjax); load average at the start "
+          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(f"{'model':18s} {'run':14s} {'wall':>6s} {'import':>6s} {'after import':>12s} {'compile':>7s} "
           f"{'fit ms':>7s} {'L2':>10s} {'x plain':>7s} {'x scipy':>7s}")
     rows = {}
@@ -183,6 +184,7 @@ def main(argv=None):
             print(_row(name, label, r, recs["plain"]["wall_s"], recs["scipy"]["wall_s"]), flush=True)
         rows[name] = recs
     _summary(rows, args)
+    print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return rows
 
 
