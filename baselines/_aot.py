@@ -8,8 +8,7 @@ of time and serialised (:mod:`jax.experimental.serialize_executable`) into ``<ca
 the way :mod:`polyjax._aot` keys its programs: the input shapes and dtypes (and which are None), every option of the
 fit, the versions of JAX and jaxlib, the machine and its device kind, float64 on or off, XLA's options, and the
 source files of polyjax and baselines (their sizes and modification times). A later process with the same key loads
-the executable and runs it; within a process the last 16 executables stay loaded, and :func:`loads_ahead` starts
-reading a call's file before the call sets LAPACK up.
+the executable and runs it; within a process the last 16 executables stay loaded.
 
 It is on whenever JAX's persistent compilation cache is (:func:`polyjax.enable_compilation_cache`, on by default in
 the command line), and off with ``POLYJAX_SAVED_PROGRAMS=off`` or ``POLYJAX_CACHE=off``. The program takes the
@@ -25,14 +24,10 @@ functions replaced at run time: a process that patches baselines' internals turn
 from __future__ import annotations
 
 import dataclasses
-import functools
 import hashlib
-import inspect
 import os
 import pickle
-import threading
 import warnings
-from concurrent.futures import Future
 from pathlib import Path
 
 import jax
@@ -41,7 +36,6 @@ import numpy as np
 import polyjax as pj
 from polyjax._aot import ENV, FOLDER, _key, _load_lapack, _source_stamp
 
-from ._registry import get_model
 from ._result import BaselineFit
 
 _OFF = ("off", "0", "no", "false", "none")
@@ -56,11 +50,6 @@ _REPORTED: set[str] = set()
 #: the executables loaded or compiled in this process, by file name (the last :data:`_KEEP`)
 _LOADED: dict[str, tuple] = {}
 _KEEP = 16
-#: files being read by :func:`loads_ahead`'s threads, by file name
-_PENDING: dict[str, Future] = {}
-#: the options of :func:`baselines.fit` that shape its program (besides the model, the inputs and the key)
-OPTION_NAMES = ("cutoff_deg", "n_starts", "backend", "max_steps", "rtol", "atol", "stage_steps", "refine",
-                "limit_steps", "order", "nonfinite")
 
 
 class SavedProgramWarning(RuntimeWarning):
@@ -143,22 +132,16 @@ def _program(fit, name: str, options: dict):
     return run
 
 
-def _read(path: Path):
-    """The executable kept at ``path`` and its backend name (raises what reading or loading it raises)."""
-    from jax.experimental import serialize_executable
-
-    payload, in_tree, out_tree, backend = pickle.loads(path.read_bytes())
-    return serialize_executable.deserialize_and_load(payload, in_tree, out_tree), backend
-
-
 def _load(path: Path):
-    """The executable kept at ``path`` and its backend name, read here or by :func:`loads_ahead`'s thread; None
-    when there is none or it cannot be read."""
-    pending = _PENDING.pop(path.name, None)
-    if pending is None and not path.is_file():
+    """The executable kept at ``path`` and its backend name; None when there is none or it cannot be read."""
+    if not path.is_file():
         return None
     try:
-        return pending.result() if pending is not None else _read(path)
+        payload, in_tree, out_tree, backend = pickle.loads(path.read_bytes())
+        _load_lapack()
+        from jax.experimental import serialize_executable
+
+        return serialize_executable.deserialize_and_load(payload, in_tree, out_tree), backend
     except Exception as e:  # noqa: BLE001 - a stale or damaged file: reported, then compiled again
         _report("read", path, e)
         return None
@@ -170,50 +153,6 @@ def _path(folder: Path, name: str, arrays, options: dict) -> Path:
     opts = dict(options, baselines_source=_stamp(), model=name, given="".join("01"[a is not None] for a in arrays),
                 compiler=sorted(COMPILER_OPTIONS.items()), device=f"{device.platform}:{device.device_kind}")
     return folder / f"baseline-{_key([a for a in arrays if a is not None], opts)}.bin"
-
-
-def loads_ahead(fit):
-    """Decorate :func:`baselines.fit` outside its :func:`polyjax.one_lapack_thread`: a saved program the call will
-    use starts loading in a thread at once, while the call sets LAPACK's threads up (which imports scipy's LAPACK,
-    about as long as loading the program; both mostly outside the GIL)."""
-    signature = inspect.signature(fit)
-
-    @functools.wraps(fit)
-    def wrapped(*args, **kwargs):
-        _start_loading(signature, args, kwargs)
-        return fit(*args, **kwargs)
-
-    return wrapped
-
-
-def _start_loading(signature, args, kwargs) -> None:
-    folder = saved_folder()
-    if folder is None:
-        return
-    try:
-        bound = signature.bind(*args, **kwargs)
-        bound.apply_defaults()
-        a = bound.arguments
-        arrays = _host_arrays(a["u"], a["v"], a["values"], a["weights"], a["mask"], a["starts"])
-        if arrays is None or not pj.is_concrete(arrays, a["key"]):
-            return
-        path = _path(folder, get_model(a["name"]).name, arrays + (a["key"],), {k: a[k] for k in OPTION_NAMES})
-    except Exception:  # noqa: BLE001 - only a head start: the call itself checks its arguments and reports
-        return
-    if path.name in _LOADED or path.name in _PENDING or not path.is_file():
-        return
-    pending: Future = Future()
-
-    def read():
-        try:
-            pending.set_result(_read(path))
-        except Exception as e:  # noqa: BLE001 - reported by the call (_load)
-            pending.set_exception(e)
-
-    _PENDING[path.name] = pending
-    while len(_PENDING) > _KEEP:
-        del _PENDING[next(iter(_PENDING))]
-    threading.Thread(target=read, daemon=True).start()
 
 
 def _compile(fit, name: str, options: dict, arrays, path: Path):
@@ -266,7 +205,6 @@ def fit_saved(fit, name: str, u, v, values, weights, mask, starts, key, throw: b
     while len(_LOADED) > _KEEP:
         del _LOADED[next(iter(_LOADED))]
     compiled, backend = got
-    _load_lapack()  # a loaded executable finds LAPACK's kernels set up only if something set them up
     try:
         fields = compiled(*arrays)
     except Exception as e:  # noqa: BLE001 - the ordinary call decides

@@ -36,7 +36,7 @@ import numpy as np
 import polyjax as pj
 from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
-from ._aot import OPTION_NAMES, fit_saved, loads_ahead
+from ._aot import fit_saved
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
 from ._joint import SUFFIX
@@ -49,7 +49,6 @@ from ._starts import check_n_starts
 from ._zernike import fit_zernike
 
 
-@loads_ahead
 @one_lapack_thread
 def fit(
     name: str,
@@ -146,8 +145,8 @@ def fit(
     if backend not in BACKENDS:
         raise InputError(f"backend: expected one of {BACKENDS}, found {backend!r}")
     check_n_starts(n_starts)
-    here = locals()
-    options = {k: here[k] for k in OPTION_NAMES}  # the call's options, as loads_ahead binds them
+    options = dict(cutoff_deg=cutoff_deg, n_starts=n_starts, backend=backend, max_steps=max_steps, rtol=rtol, atol=atol,
+                   stage_steps=stage_steps, refine=refine, limit_steps=limit_steps, order=order, nonfinite=nonfinite)
     saved = fit_saved(fit, model.name, u, v, values, weights, mask, starts, key, throw, options)  # baselines/_aot.py
     if saved is not None:
         return saved
