@@ -10,6 +10,7 @@ point (``jax.config.update("jax_enable_x64", True)``).
 """
 
 from ._abc import abc
+from ._aot import SavedProgramWarning
 from ._ashikhmin_shirley import ashikhmin_shirley
 from ._blinn_phong import blinn_phong
 from ._common import BaselineModel, Transform
@@ -41,4 +42,5 @@ __all__ = [
     "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",
     "zernike", "zernike_design", "zernike_terms",
 ]
+__all__ += ["SavedProgramWarning"]
 __all__ += ["STANDARD_MODELS", "gltf_brdf", "gltf_pbr", "principled", "principled_brdf", "standard_material"]

@@ -36,6 +36,7 @@ import numpy as np
 import polyjax as pj
 from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
+from ._aot import fit_saved
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
 from ._joint import SUFFIX
@@ -114,7 +115,9 @@ def fit(
     runs under ``jit``.
 
     The stages (screening, refinement, range-limit rounds) are jobs of one loop around one Levenberg-Marquardt
-    solve (:mod:`baselines._multistart`): the solver is traced and compiled once per model and shapes.
+    solve (:mod:`baselines._multistart`): the solver is traced and compiled once per model and shapes. With JAX's
+    persistent compilation cache on (:func:`polyjax.enable_compilation_cache`), a fit of concrete inputs runs as
+    one saved executable of the whole fit, kept in the cache folder for later processes (:mod:`baselines._aot`).
 
     Differentiable (``jit``, ``grad``, ``jvp``, ``vmap``) w.r.t. ``values``, ``weights``, ``u`` and ``v``, for
     ``params``, ``raw`` and ``l2``: the kept optimum by the implicit function theorem (:mod:`baselines._implicit`);
@@ -142,6 +145,11 @@ def fit(
     if backend not in BACKENDS:
         raise InputError(f"backend: expected one of {BACKENDS}, found {backend!r}")
     check_n_starts(n_starts)
+    options = dict(cutoff_deg=cutoff_deg, n_starts=n_starts, backend=backend, max_steps=max_steps, rtol=rtol, atol=atol,
+                   stage_steps=stage_steps, refine=refine, limit_steps=limit_steps, order=order, nonfinite=nonfinite)
+    saved = fit_saved(fit, model.name, u, v, values, weights, mask, starts, key, throw, options)  # baselines/_aot.py
+    if saved is not None:
+        return saved
     inp, cutoff = pj.prepare_inputs("fit", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
     wl, wc2 = inp.objective_weights(cutoff)
     if model.linear:

@@ -1,20 +1,30 @@
 """One Levenberg-Marquardt solve of one start with a step budget given at run time: optimistix's
 :class:`optimistix.LevenbergMarquardt` (its ``init``/``step``/``terminate``) driven by our own loop, so that
 the multi-start kernel traces this loop once and runs every stage of the fit through it
-(see :mod:`baselines._multistart`)."""
+(see :mod:`baselines._multistart`).
+
+optimistix and lineax are imported on first use: a fit served by its saved program (:mod:`baselines._aot`) never
+traces this loop, and importing them is most of ``import baselines`` (0.2 s).
+"""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
-import optimistix as optx
 
 from polyjax import Result
 
+if TYPE_CHECKING:
+    import optimistix as optx
+
 
 def lm_solver(rtol: float, atol: float) -> optx.LevenbergMarquardt:
+    import lineax as lx
+    import optimistix as optx
+
     # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
 
@@ -31,6 +41,8 @@ def lm_solve(fn, raw0, args, budget, rtol, atol):
     ``code`` a :class:`polyjax.Result` (``OK`` converged, ``MAX_STEPS`` budget spent, ``NONFINITE``, ``FAILED``).
     Not differentiable (a while loop); the fit differentiates its optimum by the implicit function theorem.
     """
+    import optimistix as optx
+
     solver = lm_solver(rtol, atol)
     r = optx.RESULTS
     fn_aux = eqx.filter_closure_convert(lambda y, a: (fn(y, a), None), raw0, args)

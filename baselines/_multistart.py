@@ -46,7 +46,10 @@ def _solve_block(model, u, v, y, sw, scale, raw0, budget, rtol, atol):
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
         return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
-    raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, 0, None, None)))(raw0, budget, y, sw)
+    if raw0.shape[1] == 1:  # one start per lane and job (refine=1, the default): one vmap level traces in half
+        raw, code, steps, l2 = (a[:, None] for a in jax.vmap(one)(raw0[:, 0], budget[:, 0], y, sw))
+    else:
+        raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, 0, None, None)))(raw0, budget, y, sw)
     return raw, code, steps, l2 * scale
 
 

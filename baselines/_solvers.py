@@ -7,8 +7,6 @@ import warnings
 
 import jax
 import jax.numpy as jnp
-import lineax as lx
-import optimistix as optx
 
 from polyjax import Result
 
@@ -27,6 +25,9 @@ def residual_fn(model, u, v):
 
 
 def _optimistix_solve(fn, raw0, args, max_steps, rtol, atol):
+    import lineax as lx  # on first use, as in baselines/_lm.py
+    import optimistix as optx
+
     # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
     sol = optx.least_squares(fn, solver, raw0, args=args, max_steps=max_steps, throw=False)

@@ -166,7 +166,7 @@ FILE_SECONDS["test_data_rgl.py"] = 38
 FILE_SECONDS.update({"test_export_materialx_usd.py": 50, "test_standard_models.py": 45, "test_user_defects_2.py": 45,
                      "test_standard_openpbr_usd.py": 40, "test_view.py": 31, "test_photometric.py": 30,
                      "test_export_standard_cli.py": 25, "test_blender.py": 25, "test_export_standard.py": 20,
-                     "test_threads.py": 15})
+                     "test_threads.py": 15, "test_baseline_saved_programs.py": 29})
 #: where a file not in the table (not measured yet) starts: as a file of this many seconds
 UNMEASURED_SECONDS = 20
 

@@ -256,6 +256,33 @@ def test_svbrdf_zero_lights_names_the_flag(capsys, tmp_path):
     assert " k" not in line.split("error:")[1]
 
 
+@pytest.mark.data
+def test_svbrdf_warns_when_texel_fits_are_not_ok(capsys, tmp_path, monkeypatch):
+    """Texels whose fits are not OK (here one channel of one texel marked RANK_DEFICIENT after the fit, as a texel
+    with too few lit samples gets) are reported: the summary's WARNING line with the count, and in --json the count
+    and the warning."""
+    import equinox as eqx
+
+    from polyjax import svbrdf
+
+    fit_rows = svbrdf.fit_rows_distributed
+
+    def one_not_ok(*args, **kwargs):
+        model = fit_rows(*args, **kwargs)
+        status = np.array(model.status)
+        status[1, 0, 2] = pj.Result.RANK_DEFICIENT
+        return eqx.tree_at(lambda m: m.status, model, jax.device_put(status, model.status.sharding))
+
+    monkeypatch.setattr(svbrdf, "fit_rows_distributed", one_not_ok)
+    args = ["svbrdf", "--size", "2", "--lights", "8", "--degree", "1", "--format", "npz"]
+    assert main(args + ["--out", str(tmp_path / "text")]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: 1 of 12 texel fits here are not OK" in out and "for degree 1" in out.split("WARNING")[1]
+    assert main(args + ["--out", str(tmp_path / "json"), "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["not_ok_local"] == 1 and rec["warnings"] == ["1 texel fits not OK"]
+
+
 # ---------------------------------------------------------------- 15: conditioning with interactions
 @pytest.mark.data
 def test_interactions_p7_on_curet_25_is_reported_ill_conditioned_in_both_bases(capsys, data_root):
@@ -363,6 +390,33 @@ def test_long_work_shows_an_elapsed_time_line_on_a_terminal_only(monkeypatch):
     with progress_line("fitting ward", after=5.0, stream=quick):  # a short fit: nothing
         pass
     assert quick.text == ""
+
+
+def test_progress_line_names_the_stage(monkeypatch):
+    """The line's stage follows JAX's own events: after a real compile of a new program, ``running``; after a
+    trace (or lowering) event, ``compiling`` with the programs ready since the block began; and the line shows it."""
+    import time
+
+    import jax.monitoring
+
+    from polyjax import _progress
+
+    _progress._listen()
+    ready = _progress._EVENTS["ready"]
+    jax.jit(lambda x: x * 3.0 + 0.25)(np.arange(7.0))  # a program no test compiled: traced, lowered, compiled
+    assert _progress._EVENTS["ready"] >= ready + 1
+    assert _progress.stage(ready) == "running"
+    jax.monitoring.record_event_duration_secs("/jax/core/compile/jaxpr_trace_duration", 0.01)
+    k = _progress._EVENTS["ready"] - ready
+    assert _progress.stage(ready) == f"compiling ({k} program{'' if k == 1 else 's'} ready)"
+    assert _progress.stage(_progress._EVENTS["ready"]) == "compiling (0 programs ready)"
+    monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
+    term = _Terminal()
+    with _progress.progress_line("fitting ward", after=0.0, interval=0.05, stream=term):
+        jax.monitoring.record_event_duration_secs("/jax/core/compile/backend_compile_duration", 0.01)
+        time.sleep(0.2)  # the line is written at once (after=0): a moment for its thread to start
+    assert "\rpolyjax: fitting ward: 0 s, running\033[K" in term.text
+    assert _progress.stage(ready) == "running"
 
 
 def test_cache_info_and_clear_commands(capsys, tmp_path):
