@@ -75,6 +75,17 @@ def _lerp(table, mu):
     return table[i] + (table[i + 1] - table[i]) * (x - i)
 
 
+def _lobes(alpha, eta, u, v):
+    """``(g, specular, diffuse per unit rho)`` of :func:`roughplastic_brdf` (neither masked to the horizon)."""
+    g = Geometry(u, v)
+    d = ndf(g.nh, alpha, False)
+    gg = smith_g1(g.v, g.h, alpha, False) * smith_g1(g.u, g.h, alpha, False)
+    spec = fresnel_dielectric(g.vh, eta)[0] * d * gg / (4.0 * g.cu * g.cv)
+    table, r_i = tables(alpha, eta)
+    t = _lerp(table, jnp.minimum(g.cu, 1.0)) * _lerp(table, jnp.minimum(g.cv, 1.0))
+    return g, spec, t / ((1.0 - r_i) * jnp.pi * eta * eta)
+
+
 def roughplastic_brdf(rho, alpha, eta, u, v):
     r"""The ``roughplastic`` BRDF of one channel (Mitsuba's ``eval`` divided by ``cos theta_u``):
 
@@ -83,18 +94,21 @@ def roughplastic_brdf(rho, alpha, eta, u, v):
 
     (see the module docs for ``T`` and ``R_i``); 0 where a direction is below the horizon.
     """
-    g = Geometry(u, v)
-    d = ndf(g.nh, alpha, False)
-    gg = smith_g1(g.v, g.h, alpha, False) * smith_g1(g.u, g.h, alpha, False)
-    spec = fresnel_dielectric(g.vh, eta)[0] * d * gg / (4.0 * g.cu * g.cv)
-    table, r_i = tables(alpha, eta)
-    diffuse = rho / ((1.0 - r_i) * jnp.pi * eta * eta)
-    return lobe(g, spec + diffuse * _lerp(table, jnp.minimum(g.cu, 1.0)) * _lerp(table, jnp.minimum(g.cv, 1.0)))
+    g, spec, diffuse = _lobes(alpha, eta, u, v)
+    return lobe(g, spec + rho * diffuse)
 
 
 def roughplastic(params, u, v):
     """``roughplastic``: ``params = (diffuse_reflectance, alpha, int_ior)`` of one channel."""
     return roughplastic_brdf(params[0], params[1], params[2], u, v)
+
+
+def roughplastic_rgb(params, u, v):
+    """The three channels ``params (3, 3)`` (shared ``alpha``, ``int_ior``) at once: ``(3, ...)``, the lobes and
+    tables computed once."""
+    g, spec, diffuse = _lobes(params[0, 1], params[0, 2], u, v)
+    rho = params[:, 0].reshape((3,) + (1,) * spec.ndim)
+    return lobe(g, spec + rho * diffuse)
 
 
 def to_material(params) -> dict:
@@ -111,6 +125,6 @@ MODEL = BaselineModel(
     name="roughplastic", param_names=("diffuse_reflectance", "alpha", "int_ior"), transforms=(UNIT, ALPHA, IOR),
     evaluate=roughplastic, n_linear=0, columns=None, guesses=grid([0.5], [0.03, 0.1, 0.3], [1.5]),
     sample=uniform_sampler([(0.05, 0.95, False), (0.005, 1.0, True), (1.1, 2.5, False)]),
-    shared_across_channels=("alpha", "int_ior"), to_material=to_material,
+    shared_across_channels=("alpha", "int_ior"), to_material=to_material, evaluate_rgb=roughplastic_rgb,
     reference="Mitsuba 3 roughplastic plugin (Walter et al. 2007; Weidlich and Wilkie 2007)",
 )

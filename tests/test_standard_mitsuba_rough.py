@@ -116,7 +116,18 @@ def test_roughconductor_joint_fit_recovers_parameters():
     np.testing.assert_allclose(material["eta"], ETA, atol=1e-6)
 
 
-@pytest.mark.slow  # the plastic's fit evaluates its tables at every step of every start: ~40 CPU-seconds
+def test_roughplastic_three_channels_at_once_equal_each_channel():
+    """The joint record's ``evaluate_rgb`` (lobes and tables once) against the model channel by channel."""
+    u, v = _hemi(50, 9), _hemi(50, 10)
+    p = np.array([[c, 0.12, 1.6] for c in (0.7, 0.4, 0.15)])
+    ours = jax.jit(_rough_plastic.roughplastic_rgb)(jnp.asarray(p), u, v)
+    np.testing.assert_allclose(ours, _evaluate("roughplastic", jnp.asarray(p), u, v), rtol=1e-13, atol=1e-15)
+    joint = bl.get_model("roughplastic:rgb")
+    np.testing.assert_allclose(jax.jit(joint.evaluate)(jnp.asarray([0.12, 1.6, 0.7, 0.4, 0.15]), u, v),
+                               np.asarray(ours).reshape(-1), rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.slow  # the plastic's fit evaluates its tables at every step of every start: ~20 CPU-seconds
 def test_roughplastic_joint_fit_recovers_parameters():
     u, v = synthetic_geometry(300, seed=0)
     p = np.array([[c, 0.12, 1.6] for c in (0.7, 0.4, 0.15)])
@@ -193,7 +204,7 @@ def test_export_mitsuba_xml_roughconductor_renders_as_polyjax(tmp_path, capsys):
                                "roughness": 0.3, "metallic": 0.0, "specular": 0.5}, tmp_path / "bad.xml")
 
 
-@pytest.mark.slow  # fits all three candidates (the plastic's fit the longest): ~90 CPU-seconds
+@pytest.mark.slow  # fits all three candidates, each compiled: ~60 CPU-seconds
 def test_export_mitsuba_xml_auto_picks_the_conductor(tmp_path, capsys):
     src = _saved_conductor(tmp_path / "metal.npz")
     out = tmp_path / "metal.xml"
