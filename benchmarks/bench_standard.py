@@ -36,6 +36,7 @@ import polyjax.render as pr  # noqa: E402
 from benchmarks.bench_merl100 import published_predictions, scores  # noqa: E402
 from benchmarks.bench_rgl import FILES as RGL_FILES  # noqa: E402
 from benchmarks.bench_rgl import ChannelsLast  # noqa: E402
+from polyjax.export._mitsuba_choice import PLUGINS, TOLERANCE, choose_plugin  # noqa: E402
 
 STANDARD = ("gltf-pbr", "gltf-pbr-specular", "principled", "openpbr", "usd-preview", "usd-preview-specular")
 PER_CHANNEL = ("cook-torrance",)
@@ -137,7 +138,8 @@ def figure(names, fits, out: Path, rgl: dict, size=96):
 
 N_PAR = {"gltf-pbr": "3 + 2", "gltf-pbr-specular": "3 + 4", "principled": "3 + 3", "cook-torrance": "3 x 4",
          "openpbr": "3 x 2 + 4", "usd-preview": "3 + 3", "usd-preview-specular": "3 x 2 + 1", POLY[0]: "3 x 70",
-         "published sgd": "3 x 10", "published abc": "3 x 5"}
+         "published sgd": "3 x 10", "published abc": "3 x 5", "roughconductor": "3 x 2 + 1",
+         "roughplastic": "3 + 2"}
 
 
 def table(names, d, preds, times) -> str:
@@ -152,6 +154,13 @@ def table(names, d, preds, times) -> str:
         rows.append(f"| {k} | {n_par.get(k, '')} | {np.median(l2[k]):.4g} | {np.median(lg[k]):.4g} | "
                     f"{beats} / {len(names)} | {t} |")
     return "\n".join(rows), l2, lg
+
+
+def plugin_choices(l2) -> str:
+    """How often ``polyjax export --to mitsuba-xml`` (its rule, :func:`choose_plugin`) would write each plugin."""
+    chosen = [choose_plugin({k: l2[k][i] for k in PLUGINS}) for i in range(len(l2["principled"]))]
+    counts = ", ".join(f"{k} {chosen.count(k)}" for k in PLUGINS)
+    return f"Mitsuba XML plugin chosen (the simplest within {TOLERANCE:g} of principled's L2): {counts}"
 
 
 def rgl_table(d, preds, rgl_rows) -> str:
@@ -201,6 +210,8 @@ def main():
     mpreds = {f"published {k}": published_predictions(k, names[:n_merl], d) for k in ("sgd", "abc")}
     mpreds.update({k: p[:n_merl] for k, p in preds.items()})
     md, l2, lg = table(names[:n_merl], merl, mpreds, times)
+    if all(k in l2 for k in PLUGINS):
+        md += "\n\n" + plugin_choices(l2)
     if rgl:
         md += "\n\nRGL files:\n\n" + rgl_table(d, preds, np.arange(n_merl, len(names)))
     preds = mpreds
@@ -211,7 +222,8 @@ def main():
         for i, n in enumerate(names):
             fh.write(n + "," + ",".join(f"{l2[k][i]:.6g}" for k in preds) + ","
                      + ",".join(f"{lg[k][i]:.6g}" for k in preds) + "\n")
-    figure(list(d.names), fits, out / "standard.png", rgl)
+    if "gltf-pbr" in fits and "openpbr" in fits:
+        figure(list(d.names), fits, out / "standard.png", rgl)
     print(md)
     print(f"total {time.perf_counter() - t0:.0f} s; load average {open('/proc/loadavg').read().split()[:3]}")
 
