@@ -137,6 +137,9 @@ class BaselineModel:
     shared_across_channels: tuple[str, ...] = ()
     #: ``to_material(params (3, P)) -> dict``: a material's constrained R, G, B parameters named as its specification
     to_material: Callable | None = None
+    #: ``evaluate_rgb(params (3, P), u, v) -> (3, n)``: the three channels at once (the joint record uses it; e.g. to
+    #: compute what depends on the shared parameters once); None evaluates each channel with ``evaluate``
+    evaluate_rgb: Callable | None = None
 
     @property
     def n_params(self) -> int:

@@ -34,6 +34,7 @@ from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._fit import fit
 from ._light_sums import light_sum_kernel, package
+from ._light_sums_joint import joint_light_sum_kernel, joint_package
 from ._registry import get_model
 from ._result import BaselineFit
 from ._starts import check_n_starts
@@ -67,7 +68,10 @@ def fit_to_images(
     kept and weighted as in :func:`polyjax.fit_polynomial_to_images` (:func:`polyjax.image_rows`).
 
     Args:
-        name: a nonlinear model of :data:`baselines.MODELS`.
+        name: a nonlinear model of :data:`baselines.MODELS`. A standard material model
+            (:data:`baselines.STANDARD_MODELS`) fits the three channels jointly, as :func:`baselines.fit` does: one
+            roughness (metallic, IOR, ...) for R, G, B, the colours per channel, the sum of the three channels'
+            objectives minimised (:mod:`baselines._light_sums_joint` under several light samples per pixel).
         scenes: a :class:`polyjax.render.Scene` or a sequence, one per image, with point and directional lights and
             environment maps, direct lighting only; the target's BRDF is a placeholder.
         images: ``(H, W, 3)`` per scene (a sequence, or ``(n, H, W, 3)``).
@@ -94,9 +98,6 @@ def fit_to_images(
     model = get_model(name)
     if model.linear:
         raise InputError(f"name: {name} is linear; fit it with polyjax.fit_polynomial_to_images-style solves")
-    if model.shared_across_channels:
-        raise InputError(f"name: {name} is a standard material model, fitted jointly over R, G, B by baselines.fit; "
-                         "fit_to_images does not fit it jointly (fit a model to data, or a per-channel model here)")
     check_n_starts(n_starts)
     rows = pj.image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
                          cutoff_deg=cutoff_deg, spp=spp, seed=seed)
@@ -133,12 +134,14 @@ def _fit_light_sums(name, rows, n_starts, key, fit_options) -> BaselineFit:
     c = jnp.moveaxis(rows.weight, -1, 0)  # (3, N, J)
     y = rows.values.T  # (3, N)
     sg = jax.lax.stop_gradient  # the solver sees constants; the optimum differentiates implicitly
-    out = light_sum_kernel(
+    joint = bool(get_model(name).shared_across_channels)  # a standard model: R, G, B jointly
+    kernel, pack = (joint_light_sum_kernel, joint_package) if joint else (light_sum_kernel, package)
+    out = kernel(
         name, sg(rows.u), sg(rows.v), sg(c), sg(y), sg(rows.pixel_weights), jax.random.PRNGKey(0) if key is None
         else key, n_starts=int(n_starts), max_steps=int(opts["max_steps"]), stage_steps=int(opts["stage_steps"]),
         rtol=float(opts["rtol"]), atol=float(opts["atol"]),
     )
-    out["raw"], out["params"], out["l2"] = package(name, out["raw"], rows.u, rows.v, c, y, rows.pixel_weights)
+    out["raw"], out["params"], out["l2"] = pack(name, out["raw"], rows.u, rows.v, c, y, rows.pixel_weights)
     status = out["status"]
     status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status)
     out.update(status=status.astype(jnp.int32), success=(status == Result.OK) & jnp.isfinite(out["l2"]))

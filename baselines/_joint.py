@@ -66,6 +66,8 @@ def joint_model(model: BaselineModel) -> BaselineModel:
     jnames = tuple(model.shared_across_channels) + tuple(f"{n}[{c}]" for c in "RGB" for n in colour)
 
     def evaluate(p, u, v):
+        if model.evaluate_rgb is not None:
+            return model.evaluate_rgb(per_channel(model, p), u, v).reshape(-1)
         return jax.vmap(lambda q: model.evaluate(q, u, v))(per_channel(model, p)).reshape(-1)
 
     def sample(key, k):
@@ -74,7 +76,7 @@ def joint_model(model: BaselineModel) -> BaselineModel:
     return dataclasses.replace(
         model, name=model.name + SUFFIX, param_names=jnames, transforms=tuple(model.transforms[i] for i in order),
         evaluate=evaluate, n_linear=0, columns=None, guesses=_joint_values(model, model.guesses), sample=sample,
-        shared_across_channels=(), to_material=None,
+        shared_across_channels=(), to_material=None, evaluate_rgb=None,
     )
 
 

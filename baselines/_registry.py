@@ -17,6 +17,8 @@ from . import (
     _openpbr,
     _oren_nayar,
     _principled,
+    _rough_conductor,
+    _rough_plastic,
     _sgd,
     _usd_preview,
     _ward,
@@ -48,6 +50,7 @@ _ALL = (
     _usd_preview.CLEARCOAT,
 )
 _ALL += (_gltf_pbr.MODEL, _gltf_pbr.SPECULAR, _gltf_pbr.ANISOTROPIC, _principled.MODEL, _principled.ANISOTROPIC)
+_ALL += (_rough_conductor.MODEL, _rough_conductor.BECKMANN, _rough_plastic.MODEL)
 REGISTRY: dict[str, BaselineModel] = {m.name: m for m in _ALL}
 
 #: Every model name accepted by :func:`baselines.fit` and :func:`baselines.get_model`.

@@ -7,6 +7,7 @@ import functools
 
 import jax.numpy as jnp
 import numpy as np
+from _mitsuba_rough_problems import ROUGH_PARAMS
 from _standard_problems import STANDARD_PARAMS as OPENPBR_USD_PARAMS
 
 import baselines as bl
@@ -56,7 +57,7 @@ def baseline_params(name: str):
     """Known constrained parameters of a baseline model (a 55-term ramp for Zernike)."""
     if name == "zernike":
         return jnp.linspace(-1.0, 1.0, bl.n_zernike_terms(8))
-    return jnp.asarray({**TRUE_PARAMS, **STANDARD_PARAMS, **OPENPBR_USD_PARAMS, **PUBLISHED_LIKE}[name])
+    return jnp.asarray({**TRUE_PARAMS, **STANDARD_PARAMS, **OPENPBR_USD_PARAMS, **PUBLISHED_LIKE, **ROUGH_PARAMS}[name])
 
 
 #: Parameters of the published compact models, typical of their MERL fits (``kap`` folded into ``rho_s``).

@@ -54,7 +54,7 @@ def test_export_standard_bad_source_and_folder(tmp_path, capsys):
 @pytest.mark.slow  # a second standard model's fit compiled: about 15 CPU-seconds
 def test_export_mitsuba_xml_of_measured_data(tmp_path, capsys, data_root):
     out = tmp_path / "bronze.xml"
-    assert main(["export", "merl-nbrdf:alum-bronze", "--to", "mitsuba-xml", "--subsample", "2000", "--out", str(out),
-                 "--data-root", str(data_root)]) == 0
+    assert main(["export", "merl-nbrdf:alum-bronze", "--to", "mitsuba-xml", "--plugin", "principled", "--subsample",
+                 "2000", "--out", str(out), "--data-root", str(data_root)]) == 0
     assert '<bsdf type="principled" id="material">' in out.read_text()
     assert "principled fitted to merl-nbrdf:alum-bronze" in capsys.readouterr().out

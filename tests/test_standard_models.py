@@ -230,8 +230,3 @@ def test_joint_fit_needs_a_channel_axis_of_three(geometry):
         bl.fit("gltf-pbr", u, v, np.ones((2, u.shape[0])))
     with pytest.raises(pj.InputError, match="standard material model"):
         bl.standard_material(baseline_fit_at("ward", [0.3, 0.2, 0.15]))
-
-
-def test_fit_to_images_refuses_the_joint_models():
-    with pytest.raises(pj.InputError, match="standard material model, fitted jointly over R, G, B"):
-        bl.fit_to_images("gltf-pbr", [], [])

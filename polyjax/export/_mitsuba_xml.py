@@ -33,8 +33,10 @@ def mitsuba_xml(material, path, *, scene=None, material_id: str = "material"):
 
     - ``{"model": "principled", "base_color": [r, g, b], "roughness", "metallic", "specular", "spec_tint",
       "anisotropic", ...}``: Mitsuba's ``principled`` plugin (parameters of the same names, others at 0);
-    - ``{"model": "roughconductor", "alpha", "eta": [3], "k": [3]}``: ``roughconductor``, GGX;
-    - ``{"model": "roughplastic", "alpha", "diffuse_reflectance": [3], "int_ior"}``: ``roughplastic``, GGX.
+    - ``{"model": "roughconductor", "alpha", "eta": [3], "k": [3]}``: ``roughconductor``;
+    - ``{"model": "roughplastic", "alpha", "diffuse_reflectance": [3], "int_ior"}``: ``roughplastic``;
+
+    the last two with ``"distribution": "ggx"`` (the default) or ``"beckmann"``.
 
     Returns:
         The path written (written whole or not at all).
@@ -44,8 +46,10 @@ def mitsuba_xml(material, path, *, scene=None, material_id: str = "material"):
             material value, a scene that is not spheres under point or directional lights with a perspective camera.
     """
     path = _check_path(path, (".xml",))
-    mat = check_material(material_of(material), MODELS)
-    bsdf = _bsdf_xml(mat, material_id)
+    mat = material_of(material)
+    distribution = _distribution(mat)
+    mat = check_material({k: x for k, x in mat.items() if k != "distribution"}, MODELS)
+    bsdf = _bsdf_xml(mat, material_id, distribution)
     body = [bsdf] if scene is None else [bsdf] + _scene_xml(scene, material_id)
     text = '<?xml version="1.0" encoding="utf-8"?>\n<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
     _write_atomic(path, text.encode())
@@ -58,10 +62,22 @@ def _prop(key: str, value) -> str:
     return f'<float name="{key}" value="{float(value)!r}"/>'
 
 
-def _bsdf_xml(mat: dict, material_id: str) -> str:
+def _distribution(mat: dict) -> str:
+    """The microfacet distribution of a ``roughconductor`` / ``roughplastic`` dict: ``"ggx"`` unless given."""
+    if "distribution" not in mat:
+        return "ggx"
+    if mat.get("model") not in ("roughconductor", "roughplastic"):
+        raise InputError(f"material['distribution']: only roughconductor and roughplastic materials take one, found "
+                         f"a {mat.get('model')!r} material")
+    if mat["distribution"] not in ("ggx", "beckmann"):
+        raise InputError(f"material['distribution']: expected 'ggx' or 'beckmann', found {mat['distribution']!r}")
+    return mat["distribution"]
+
+
+def _bsdf_xml(mat: dict, material_id: str, distribution: str = "ggx") -> str:
     props = [_prop(k, v) for k, v in mat.items() if k != "model"]
     if mat["model"] != "principled":
-        props.insert(0, '<string name="distribution" value="ggx"/>')
+        props.insert(0, f'<string name="distribution" value="{distribution}"/>')
     inner = "\n".join("        " + p for p in props)
     return f'    <bsdf type="{mat["model"]}" id={quoteattr(material_id)}>\n{inner}\n    </bsdf>'
 

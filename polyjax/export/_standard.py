@@ -1,5 +1,6 @@
 r"""``polyjax export FIT_OR_DATA --to gltf|mitsuba-xml``: a standard material fitted to a saved model or a measured
-data set, written in that format, with the error the projection onto the standard model costs.
+data set, written in that format, with the error the projection onto the standard model costs (for Mitsuba XML
+the plugin chosen by :mod:`polyjax.export._mitsuba_choice`).
 
 The standard model is fitted by the package that provides it (``baselines``, found through its registered model
 kind, :func:`polyjax._kinds.fitter_for`): R, G, B jointly, paper equation (11) with the 80-degree cutoff. A saved
@@ -17,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._mitsuba_choice import PLUGINS, TOLERANCE, fit_plugin
+
 #: target -> (standard model fitted, writer in :mod:`polyjax.export`, default suffix)
 TARGETS: dict[str, tuple[str, str, str]] = {
     "gltf": ("gltf-pbr", "gltf", ".glb"),
@@ -32,6 +35,11 @@ def add_standard_arguments(p) -> None:
                    help="direction pairs a saved model is tabulated at (--to gltf, mitsuba-xml, openpbr, usd)")
     p.add_argument("--subsample", type=int, default=None,
                    help="keep this many samples of a measured data set (--to gltf, mitsuba-xml, openpbr, usd)")
+    p.add_argument("--plugin", default="auto", choices=("auto",) + PLUGINS,
+                   help="the Mitsuba plugin written (--to mitsuba-xml); auto: the simplest of "
+                   f"{', '.join(PLUGINS)} whose L2 is within --tolerance of principled's")
+    p.add_argument("--tolerance", type=float, default=TOLERANCE,
+                   help=f"--plugin auto: how much larger than principled's L2 a simpler plugin's may be ({TOLERANCE})")
 
 
 def _tabulated(model, n: int, seed: int = 0):
@@ -122,7 +130,10 @@ def run_standard_export(args) -> int:
         raise pj.InputError(f"--out: the folder {str(out.parent)!r} does not exist")
     kind, model_name = fitter_for(name)
     data = _source(args)
-    fit = kind.fit(model_name, data)
+    if args.to == "mitsuba-xml":  # the simplest Mitsuba plugin that fits as well as principled
+        model_name, fit = fit_plugin(data, args.plugin, args.tolerance)
+    else:
+        fit = kind.fit(model_name, data)
     pred = np.asarray(fit(np.asarray(data.u), np.asarray(data.v)))
     values = np.asarray(data.values)
     l2 = np.asarray(fit.l2)
