@@ -9,7 +9,7 @@ entry point group ``polyjax.models`` (``pyproject.toml``) and registered when :m
 from __future__ import annotations
 
 from polyjax import register_model_kind
-from polyjax._kinds import module_kind
+from polyjax._io import module_kind
 
 from ._fit import fit
 from ._registry import MODELS

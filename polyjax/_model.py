@@ -9,10 +9,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
+from numpy.polynomial import legendre, polynomial
 
 from ._basis import design_matrix, exponents, n_terms
+from ._directions import safe_normalize
 from ._errors import InputError
-from ._geometry import safe_normalize
 from ._results import Result
 from ._variables import get_variables
 
@@ -59,7 +60,7 @@ class PolynomialBRDF(eqx.Module):
     basis: str = eqx.field(static=True)
     interactions: bool = eqx.field(static=True)
     max_degree: int = eqx.field(static=True)
-    link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._logfit)
+    link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._fit.log)
     eps: float = eqx.field(static=True, default=0.0)
 
     @property
@@ -129,8 +130,6 @@ class PolynomialBRDF(eqx.Module):
         """
         if self.interactions:
             raise ValueError("paper_coefficients: only defined for the model of equation (3) (interactions=False)")
-        from numpy.polynomial import legendre, polynomial
-
         k, p = self.k, self.max_degree
         coef = np.asarray(self.coefficients, dtype=np.float64).reshape(-1, k * p + 1)
         centre = np.asarray(self.centre, dtype=np.float64).reshape(-1, k)
@@ -183,7 +182,7 @@ def _evaluate(model: PolynomialBRDF, u, v):
         flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
         out = jax.vmap(lambda p: model._lane(p, x))(flat)
         out = out.reshape(model.batch_shape + out.shape[1:])
-    if model.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
+    if model.link == "log":  # f = exp(poly) - eps (polyjax._fit.log)
         out = jnp.exp(out) - model.eps
     return jnp.where(above, out, 0.0)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-from polyjax._cli import main
+from polyjax.cli._main import main
 
 
 @pytest.mark.data

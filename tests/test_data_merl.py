@@ -272,7 +272,7 @@ def test_loaded_grid_directions_are_taken_as_unit(tmp_path):
     import jax.numpy as jnp
 
     from polyjax import _inputs
-    from polyjax._geometry import safe_normalize
+    from polyjax._directions import safe_normalize
     from polyjax.data import _merl
 
     _merl._device_grid.cache_clear()  # made again by the next load, as in a fresh process
@@ -334,7 +334,7 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
     once, the same value returned); an error there is raised by the caller's call, and not remembered."""
     import threading
 
-    from polyjax.data import _merl
+    from polyjax._cache.memo import GridMemo
 
     calls, started, release = [], threading.Event(), threading.Event()
 
@@ -354,7 +354,7 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
         assert started.wait(10.0)
         threading.Timer(0.1, release.set).start()
 
-    memo = _merl._GridMemo(slow, maxsize=2)
+    memo = GridMemo(slow, maxsize=2)
     under_way(1)
     value = memo(1)
     assert value == [1] and memo(1) is value and calls == [1]

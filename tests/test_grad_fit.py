@@ -12,8 +12,8 @@ import pytest
 from jax.test_util import check_grads
 
 import polyjax as pj
-from polyjax._linalg import eigh
-from polyjax._lstsq import TALL_ROWS
+from polyjax._solve.linalg import eigh
+from polyjax._solve.lstsq import TALL_ROWS
 
 from _problems import curet
 from _robust_problems import random_hemisphere

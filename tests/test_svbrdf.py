@@ -109,7 +109,7 @@ def test_rerender_under_new_light(capture_fit, tmp_path):
 
 @pytest.mark.data
 def test_svbrdf_cli(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli._main import main
 
     rc = main(["svbrdf", "--size", "8", "--lights", "48", "--materials", ",".join(MATERIALS), "--degree",
                str(DEGREE), "--out", str(tmp_path / "tex"), "--json"])
@@ -129,7 +129,7 @@ def test_svbrdf_cli(tmp_path, capsys):
 def test_svbrdf_cli_cameras(tmp_path, capsys):
     """``--cameras 3`` (``svbrdf.spread_cameras(3)``) and explicit positions: every texel fitted from C K
     photographs, re-rendered from every camera."""
-    from polyjax._cli import main
+    from polyjax.cli._main import main
 
     for cams, c in (("3", 3), ("0,-1.5,2.5;1,1,2", 2)):
         out_dir = tmp_path / f"tex{c}"
@@ -146,7 +146,7 @@ def test_svbrdf_cli_cameras(tmp_path, capsys):
 
 
 def test_svbrdf_cli_bad_light(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli._main import main
 
     assert main(["svbrdf", "--new-light", "1,2", "--out", str(tmp_path)]) == 2
     assert "--new-light: expected 3 comma-separated numbers" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""LAPACK's threads: one inside polyjax's calls, the user's own setting outside them (polyjax/_threads.py).
+"""LAPACK's threads: one inside polyjax's calls, the user's own setting outside them (polyjax/_solve/threads.py).
 
 Each check runs in a fresh process, so that the libraries start as a user's process starts them: OpenBLAS with
 its default thread count (or the user's ``OPENBLAS_NUM_THREADS``) and jaxlib's LAPACK not yet loaded. Inside the

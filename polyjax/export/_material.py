@@ -8,8 +8,8 @@ import os
 from pathlib import Path
 from typing import Callable
 
+from .._config import check_output_file
 from .._errors import InputError
-from .._outputs import check_output_file
 
 #: ``(low, high)`` of an input; ``None`` for no upper limit.
 Range = tuple[float, "float | None"]

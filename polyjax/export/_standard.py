@@ -2,7 +2,7 @@ r"""``polyjax export FIT_OR_DATA --to gltf|mitsuba-xml``: a standard material fi
 data set, written in that format, with the error the projection onto the standard model costs.
 
 The standard model is fitted by the package that provides it (``baselines``, found through its registered model
-kind, :func:`polyjax._kinds.fitter_for`): R, G, B jointly, paper equation (11) with the 80-degree cutoff. A saved
+kind, :func:`polyjax._io.fitter_for`): R, G, B jointly, paper equation (11) with the 80-degree cutoff. A saved
 model is tabulated first at ``--samples`` random direction pairs (uniform in solid angle, equal weights, a quarter
 of the views near the mirror direction so that glossy lobes are sampled), a data set (``merl-nbrdf:<name>``,
 ``merl:<file>``, ``cornell:<name>``, ...) is used as loaded (``--subsample``).
@@ -111,9 +111,9 @@ def run_standard_export(args) -> int:
     import jax
 
     import polyjax as pj
-    from polyjax._kinds import fitter_for
 
     from .. import export
+    from .._io import fitter_for
 
     jax.config.update("jax_enable_x64", True)
     name, writer, suffix = TARGETS[args.to]

@@ -19,7 +19,7 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from .._errors import InputError
-from .._fit import fit_polynomial
+from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
 
 #: the mesh axis of the texel rows

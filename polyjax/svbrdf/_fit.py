@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from .._fit import LANE_BLOCK, fit_polynomial
+from .._fit.closed_form import LANE_BLOCK
+from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
-from .._threads import one_lapack_thread
+from .._solve.threads import one_lapack_thread
 from ._capture import Capture
 
 

@@ -114,7 +114,7 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
 
     The text is built completely before the file is opened (no half-written page). Returns the path written.
     """
-    from .._outputs import check_output_file
+    from .._config import check_output_file
 
     path = check_output_file(path, "out")
     _check_settings(settings)  # before the items' work

@@ -6,10 +6,24 @@ from __future__ import annotations
 import argparse
 import time
 
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.experimental import multihost_utils
+
+import polyjax as pj
+
+from .._basis import n_terms
+from .._config import check_output_dir
+from .._errors import InputError
+from .._variables import get_variables
+from ..svbrdf import _distributed, fit_rows_distributed, photograph, relight, simulate_capture, write_texture_shards
+from ..svbrdf._capture import spread_cameras
+from ..svbrdf._shards import FORMATS, local_part
+from ._args import strict_json
+
 
 def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
-    from .._errors import InputError
-
     try:
         vals = tuple(float(t) for t in text.split(","))
     except ValueError:
@@ -21,9 +35,6 @@ def _floats(text: str, n: int, flag: str) -> tuple[float, ...]:
 
 def _cameras(text: str | None):
     """``--cameras``: None (the default camera), an integer ``C`` or ``x,y,z;x,y,z...``."""
-    from .._errors import InputError
-    from ._capture import spread_cameras
-
     if text is None:
         return None
     if text.strip().isdigit():
@@ -69,10 +80,6 @@ def add_svbrdf_parser(sub, parents=()) -> argparse.ArgumentParser:
 def _check_samples_per_texel(args, cameras) -> None:
     """Refuse, before any work, per-texel fits with more parameters than a texel can have samples (one per light
     and camera): every texel's fit would fail."""
-    from .._basis import n_terms
-    from .._errors import InputError
-    from .._variables import get_variables
-
     n_cameras = 1 if cameras is None else len(cameras)
     m = n_terms(get_variables(args.variables).k, args.degree)
     if m > args.lights * n_cameras:
@@ -83,11 +90,6 @@ def _check_samples_per_texel(args, cameras) -> None:
 
 
 def run_svbrdf(args) -> int:
-    from .._errors import InputError
-    from .._outputs import check_output_dir, strict_json
-    from . import _distributed
-    from ._shards import FORMATS
-
     light = _floats(args.new_light, 3, "--new-light")  # argument errors before any work
     cameras = _cameras(args.cameras)
     formats = tuple(f.strip() for f in args.format.split(","))
@@ -100,14 +102,6 @@ def run_svbrdf(args) -> int:
     _check_samples_per_texel(args, cameras)
     check_output_dir(args.out, "--out")  # the one rule of every command: its parent folder must exist
     _distributed.initialize(args.coordinator, args.num_processes, args.process_id)  # before any JAX computation
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    import polyjax as pj
-
-    from . import fit_rows_distributed, photograph, relight, simulate_capture, write_texture_shards
-    from ._shards import local_part
 
     root = getattr(args, "data_root", None)
     names = [n.strip() for n in args.materials.split(",") if n.strip()]
@@ -133,8 +127,6 @@ def run_svbrdf(args) -> int:
     np.savez(f"{args.out}/relit-rows-{cap.row0}-{cap.row0 + cap.positions.shape[0]}.npz",
              relit=np.asarray(image), photograph=np.asarray(ref))
     if jax.process_count() > 1:
-        from jax.experimental import multihost_utils
-
         parts = np.asarray(multihost_utils.process_allgather(np.array([sse, count, peak])))  # 3 scalars per process
         sse, count, peak = parts[:, 0].sum(), parts[:, 1].sum(), parts[:, 2].max()
     psnr = float(10 * np.log10(peak**2 / (sse / count))) if sse > 0 else float("inf")
@@ -158,3 +150,8 @@ def run_svbrdf(args) -> int:
                       f"(status other than OK: e.g. too few lit samples for degree {args.degree}); the PSNR above "
                       "includes them. Try a lower --degree or more --lights.")
     return 0
+
+
+def add_parser(sub, common) -> None:
+    """The ``svbrdf`` command's parser."""
+    add_svbrdf_parser(sub, parents=[common])

@@ -6,6 +6,33 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import jax
+import numpy as np
+
+import polyjax as pj
+
+from .._config import check_output_file, configured_data_root
+from .._errors import InputError
+from .._io import fitter_for
+from ..render import (
+    Camera,
+    DirectionalLight,
+    PointLight,
+    Scene,
+    Sphere,
+    SwapUV,
+    comparison_figure,
+    load_envmap,
+    mosaic,
+    procedural_sky,
+    render_grid,
+    rgb_brdf,
+    write_exr,
+    write_png,
+)
+from ..render._brdf import TabulatedBRDF
+from ._args import check_degrees_fit, parse_degrees
+
 
 def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     """Add the ``render`` subcommand to an ``argparse`` subparsers object and return its parser."""
@@ -38,10 +65,6 @@ def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
 
 
 def _lights(spec: str):
-    import numpy as np
-
-    from . import DirectionalLight, PointLight, load_envmap, procedural_sky
-
     if spec == "point":
         return [PointLight(position=(2.0, 2.0, 4.0), intensity=24.0)]
     if spec == "directional":
@@ -53,12 +76,6 @@ def _lights(spec: str):
 
 def _reference(spec: str, m, k: int, root):
     """The measured BRDF of material ``k``: the neural MERL network itself, or interpolated samples."""
-    import numpy as np
-
-    import polyjax as pj
-
-    from ._brdf import TabulatedBRDF
-
     kind, _, _ = spec.partition(":")
     if kind.strip().lower() == "merl-nbrdf" and hasattr(pj.data, "load_nbrdf"):
         names = list(m.names) if m.names else [spec.partition(":")[2]]
@@ -79,19 +96,10 @@ def _reference(spec: str, m, k: int, root):
 
 def run_render(args) -> int:
     """Run ``polyjax render`` from parsed arguments; returns the exit status."""
-    import numpy as np
-
-    import polyjax as pj
-
-    from .._cli import _parse_degrees, check_degrees_fit
-    from .._config import configured_data_root
-    from .._outputs import check_output_file
-    from . import Camera, Scene, Sphere, SwapUV, mosaic, render_grid, write_exr, write_png
-
     root = getattr(args, "data_root", None)
     out = Path(args.out)
     check_output_file(out.with_suffix(".exr"), "--out")
-    degrees = _parse_degrees(args.degrees, "--degrees")
+    degrees = parse_degrees(args.degrees, "--degrees")
     spec = args.dataset or ("curet:25" if configured_data_root(root) is not None else "synthetic")
     m = pj.data.synthetic_default() if spec == "synthetic" else pj.data.load(spec, root)
     if not args.model or args.model.strip().lower() == "polynomial":
@@ -121,10 +129,6 @@ def _rows(args, m, spec: str, root, degrees, n_mat: int, has_channels: bool):
     """The grid's rows (one RGB BRDF per material each) and their names: the measured reference with
     ``--reference``, then the ``--model`` (a saved file or a baseline fitted to ``m``) or one polynomial fit per
     degree."""
-    import polyjax as pj
-
-    from .._kinds import fitter_for
-
     saved = None  # the --model row, made first: a model that does not match the dataset fails before any work
     if args.model and args.model.strip().lower() != "polynomial":
         is_file = Path(args.model).suffix in (".npz", ".json") or Path(args.model).exists()
@@ -151,12 +155,6 @@ def _rows(args, m, spec: str, root, degrees, n_mat: int, has_channels: bool):
 
 def _lanes(model, n_mat: int, has_channels: bool, model_arg, spec: str):
     """One RGB BRDF per material of a model with batch shape (materials..., [channels])."""
-    import jax
-    import numpy as np
-
-    from .._errors import InputError
-    from . import rgb_brdf
-
     nb = len(model.batch_shape) - (1 if has_channels else 0)
     n_model = int(np.prod(model.batch_shape[:max(nb, 0)], dtype=int))
     if n_model != n_mat:
@@ -173,8 +171,6 @@ def _lanes(model, n_mat: int, has_channels: bool, model_arg, spec: str):
 def _compare(out: Path, images, hit, row_names, names, n_mat: int, exposure: float) -> None:
     """One comparison figure per material (``<out>_<k>_compare.png``), the measured row against the others, with
     their PSNR printed."""
-    from . import comparison_figure
-
     for k in range(n_mat):
         fig = out.parent / f"{out.name}_{k}_compare.png"
         scores = comparison_figure(fig, images[0, k], list(images[1:, k]), row_names[1:], exposure=exposure, mask=hit)
@@ -182,4 +178,6 @@ def _compare(out: Path, images, hit, row_names, names, n_mat: int, exposure: flo
               ", ".join(f"{n} {s:.2f} dB" for n, s in scores.items()) + f"  ({fig})")
 
 
-__all__ = ["add_render_parser", "run_render"]
+def add_parser(sub, common) -> None:
+    """The ``render`` command's parser."""
+    add_render_parser(sub, parents=[common]).set_defaults(func=run_render)

@@ -3,7 +3,7 @@
 A fit's lanes (materials, channels, texels) are independent, so a batch sharded over its leading axis with a
 :class:`jax.sharding.NamedSharding` needs no communication at all. It is run under :func:`jax.shard_map` rather
 than handed to the partitioner: the per-lane path loops over blocks of lanes (:func:`jax.lax.map`) and maps its
-factorisations one matrix at a time (``custom_vmap`` in :mod:`polyjax._linalg`), and neither partitions along
+factorisations one matrix at a time (``custom_vmap`` in :mod:`polyjax._solve.linalg`), and neither partitions along
 the mapped axis. With ``Explicit`` mesh axes (the default of :func:`jax.make_mesh`) ``vmap`` refuses a batch
 sharded differently from the replicated design ("Mapped away dimension ... should be sharded the same"); inputs
 on a mesh with ``Auto`` axes take the same path. Under ``shard_map`` every
@@ -23,7 +23,7 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ._errors import InputError
+from .._errors import InputError
 
 
 def _named_sharding(a):

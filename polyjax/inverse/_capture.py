@@ -21,7 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from ._errors import InputError
+from .._errors import InputError
+from ..render import Camera, DirectionalLight, Lambertian, NormalMap, Scene, render, rgb_brdf
+from ..render._integrator import _replaced
 
 
 class Capture(eqx.Module):
@@ -62,8 +64,6 @@ class Capture(eqx.Module):
     def scenes(self) -> tuple:
         """One :class:`polyjax.render.Scene` per light (module notes): the normal map (a placeholder BRDF) seen by
         an orthographic camera along ``-z``, lit by that light alone."""
-        from .render import Camera, DirectionalLight, Lambertian, NormalMap, Scene
-
         h, w = np.shape(self.mask)
         camera = Camera(eye=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), width=w, height=h,
                         ortho_height=2.0)
@@ -113,9 +113,6 @@ def relight(model, capture: Capture, *, dtype=None) -> Float[Array, "l h w 3"]:
         capture: the :class:`Capture` whose lights and normals are used (its images are not).
         dtype: the render's floating-point type (default: the default float, float64 under x64).
     """
-    from .render import NormalMap, render, rgb_brdf
-    from .render._integrator import _replaced
-
     if not isinstance(capture, Capture):
         raise InputError(f"capture: expected a polyjax.Capture, found {type(capture).__name__}")
     brdf = rgb_brdf(model)

@@ -23,15 +23,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._basis import BASES
-from ._design import fitted_design as _design_for
-from ._errors import InputError
-from ._image_rows import image_rows
-from ._image_samples import WEIGHTINGS, fit_samples
-from ._lstsq import METHODS, weighted_lstsq
-from ._model import FitStatus, PolynomialBRDF
-from ._threads import one_lapack_thread
-from ._variables import get_variables
+from .._basis import BASES
+from .._design import fitted_design as _design_for
+from .._errors import InputError
+from .._model import FitStatus, PolynomialBRDF
+from .._solve.lstsq import METHODS, weighted_lstsq
+from .._solve.threads import one_lapack_thread
+from .._variables import get_variables
+from ._rows import image_rows
+from ._samples import WEIGHTINGS, fit_samples
 
 
 def _concrete(x) -> bool:
@@ -63,7 +63,7 @@ def fit_polynomial_to_images(
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
     because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve`` (or
-    :func:`polyjax._image_samples.fit_samples` for the BRDF-sample fits).
+    :func:`polyjax.inverse._samples.fit_samples` for the BRDF-sample fits).
 
     Minimises, per colour channel, ``sum_pixels w_px (I_px - L_px(beta))^2`` over the kept pixels of
     every image, where ``L_px(beta)`` is the render of the polynomial (linear in ``beta``, see the
@@ -110,9 +110,9 @@ def fit_polynomial_to_images(
             pixels' BRDF samples; one light sample per pixel).
         weighting: ``"radiance"`` (the squared pixel residuals, above) or ``"brdf"`` (``sum w (I / c - f)^2``:
             the residuals of the pixels' BRDF samples ``I / c``, one light sample per pixel;
-            :mod:`polyjax._image_samples`).
+            :mod:`polyjax.inverse._samples`).
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
-            their MAD: :mod:`polyjax._image_samples`); 0: none. One light sample per pixel.
+            their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any

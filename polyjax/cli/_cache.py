@@ -2,14 +2,17 @@
 a size cap applied after every command-line run (least recently used files removed first).
 
 The folder holds JAX's persistent compilation cache (its entries at the top level), the command line's saved
-executables (``polyjax-programs/``, :mod:`polyjax._aot`) and the streamed fits' geometry
-(:mod:`polyjax._geometry_store`). Every file there is a cache entry that a later run can make again.
+executables (``polyjax-programs/``, :mod:`polyjax._fit.saved`) and the streamed fits' geometry
+(:mod:`polyjax._cache.geometry`). Every file there is a cache entry that a later run can make again.
 """
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
+
+from .._cache.compilation import default_cache_dir
+from .._errors import InputError
 
 #: environment variable: the cache folder's size cap in MiB (``0`` or ``off``: no cap)
 MAX_ENV = "POLYJAX_CACHE_MAX_MB"
@@ -23,8 +26,6 @@ def cache_cap_bytes() -> int | None:
     Raises:
         InputError: a value that is not a non-negative number.
     """
-    from ._errors import InputError
-
     text = os.environ.get(MAX_ENV, str(DEFAULT_MAX_MB)).strip().lower()
     if text in ("off", "none", ""):
         return None
@@ -100,4 +101,30 @@ def trim_cache(folder: str | os.PathLike, max_bytes: int | None) -> tuple[int, i
     return n, removed
 
 
-__all__ = ["DEFAULT_MAX_MB", "MAX_ENV", "cache_cap_bytes", "cache_usage", "clear_cache", "trim_cache"]
+def add_parser(sub, common) -> None:
+    """The ``cache`` command's parser."""
+    c = sub.add_parser("cache", parents=[common], help="what the compilation cache folder holds, or empty it",
+                       description="info: the cache folder's files and size, and its cap ($POLYJAX_CACHE_MAX_MB, "
+                       "default 2048; after each run the least recently used files are removed beyond it). clear: "
+                       "remove every file in it (later runs compile again).")
+    c.add_argument("action", choices=["info", "clear"], help="info or clear")
+    c.set_defaults(func=cmd_cache)
+
+
+def cmd_cache(args) -> int:
+    """``polyjax cache info|clear``: what the cache folder holds (files, size, cap), or empty it."""
+    folder = default_cache_dir() if args.cache_dir is None else Path(args.cache_dir).expanduser()
+    if args.action == "clear":
+        n, size = clear_cache(folder)
+        print(f"removed {n} file(s), {size / 2**20:.1f} MiB, from {folder}")
+        return 0
+    use, cap = cache_usage(folder), cache_cap_bytes()
+    print(f"cache folder: {folder}{'' if folder.is_dir() else ' (not created yet)'}")
+    print(f"  {use['files']} file(s), {use['bytes'] / 2**20:.1f} MiB; cap "
+          + (f"{cap / 2**20:.0f} MiB" if cap else "none") + f" (${MAX_ENV}; least recently used files go first)")
+    for part, (n, size) in sorted(use["parts"].items()):
+        what = "JAX's compiled programs" if part == "." else part
+        print(f"  {what}: {n} file(s), {size / 2**20:.1f} MiB")
+    return 0
+
+

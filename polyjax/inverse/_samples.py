@@ -1,7 +1,7 @@
 r"""Images under one light sample per pixel as BRDF samples: the weighting and robust reweighting of photographs.
 
 Under one point or directional light per image a kept pixel's radiance is ``I = c f(u, v)`` with
-``c = E cos(theta_u) V`` (:mod:`polyjax._image_rows`), so each pixel is a sample ``b = I / c`` of the BRDF and a
+``c = E cos(theta_u) V`` (:mod:`polyjax.inverse._rows`), so each pixel is a sample ``b = I / c`` of the BRDF and a
 fit from images is :func:`polyjax.fit_polynomial` on those samples (which takes ``link="log"`` and
 ``interactions``) with weights that set the space the residual is measured in (``weighting``):
 
@@ -37,7 +37,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._errors import InputError
+from .._errors import InputError
+from .._fit.polynomial import fit_polynomial
 
 #: the ``weighting=`` choices of :func:`polyjax.fit_polynomial_to_images`
 WEIGHTINGS = ("radiance", "brdf")
@@ -92,8 +93,6 @@ def masked_median(x, mask):
 def fit_samples(rows, variables, degree, *, weighting, robust_steps, options):
     """:func:`polyjax.fit_polynomial` on the BRDF samples of ``rows`` (one light sample per pixel), then
     ``robust_steps`` reweighted fits (module notes)."""
-    from ._fit import fit_polynomial
-
     u, v, values, weights, mask = samples_of_rows(rows, weighting)
     model = fit_polynomial(u, v, values, variables, degree, weights=weights, mask=mask, cutoff_deg=None, **options)
     for _ in range(int(robust_steps)):

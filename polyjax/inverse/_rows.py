@@ -22,9 +22,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._arrays import device_array
-from ._errors import InputError
-from ._inputs import is_concrete
+from .._arrays import device_array, is_concrete
+from .._errors import InputError
+from ..render._linear import light_samples
+from ..render._scene import Scene
 
 
 class ImageRows(eqx.Module):
@@ -91,8 +92,6 @@ def image_rows(
         InputError: scenes/images/pixel weights that disagree in number or size, an image not ``(H, W, 3)``,
             negative or non-finite pixel weights, bad options, a scene with inter-reflections.
     """
-    from .render._linear import light_samples
-
     scenes, images, pixel_weights = _checked_lists(scenes, images, pixel_weights)
     if cutoff_deg is not None and not (0.0 < float(cutoff_deg) <= 90.0):
         raise InputError(f"cutoff_deg: expected an angle in (0, 90] degrees or None, found {cutoff_deg}")
@@ -117,8 +116,6 @@ def image_rows(
 
 def _checked_lists(scenes, images, pixel_weights):
     """``scenes``, ``images`` and ``pixel_weights`` as lists of one entry per scene (``None``: weight 1)."""
-    from .render._scene import Scene
-
     scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
     if not scenes:
         raise InputError("scenes: expected at least one polyjax.render.Scene")

@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._standard import TARGETS, add_standard_arguments, run_standard_export
+import polyjax as pj
+
+from .._config import check_output_file
+from .._errors import InputError
+from ..export._expr import program
+from ..export._glsl import brdf_explorer, glsl
+from ..export._merl import merl_binary
+from ..export._rgl import is_rgl_source, rgl_to_merl
+from ..export._standard import TARGETS, add_standard_arguments, run_standard_export
+from ..render._brdf import rgb_brdf
 
 FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
 
@@ -52,8 +61,6 @@ def add_export_parser(sub, parents=()) -> argparse.ArgumentParser:
 def _lane_index(texts, batch_shape) -> tuple[int, ...] | None:
     """``--index`` values (each ``"1"`` or ``"1,0"``) -> one integer per leading batch axis, checked against
     ``batch_shape``; None when not given."""
-    from .._errors import InputError
-
     if not texts:
         return None
     try:
@@ -71,8 +78,6 @@ def _lane_index(texts, batch_shape) -> tuple[int, ...] | None:
 
 def _check_one_brdf(model, index) -> None:
     """Refuse, naming the command line's ``--index``, a model that still holds several BRDFs."""
-    from .._errors import InputError
-
     bs = tuple(model.batch_shape)
     if bs not in ((), (1,), (3,)):
         given = f" after --index {','.join(map(str, index))}" if index else ""
@@ -82,15 +87,8 @@ def _check_one_brdf(model, index) -> None:
 
 def run_export(args) -> int:
     """Run ``polyjax export``: the output path is checked before the model is read; returns the exit status."""
-    import polyjax as pj
-
-    from .._outputs import check_output_file
-    from ._rgl import is_rgl_source
-
     if is_rgl_source(args.model):
         return _run_rgl_export(args)
-    from ._glsl import brdf_explorer, glsl
-    from ._merl import merl_binary
 
     if args.to in TARGETS:
         return run_standard_export(args)
@@ -108,9 +106,6 @@ def run_export(args) -> int:
     elif args.to == "merl":
         merl_binary(model, out)
     else:
-        from ..render._brdf import rgb_brdf
-        from ._expr import program
-
         if isinstance(model, pj.PolynomialBRDF):
             program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
         rgb_brdf(model)
@@ -122,10 +117,6 @@ def run_export(args) -> int:
 
 def _run_rgl_export(args) -> int:
     """``polyjax export <file.bsdf or rgl:spec> --to merl``: an RGL-EPFL measured BSDF as a MERL ``.binary``."""
-    import polyjax as pj
-
-    from ._rgl import rgl_to_merl
-
     if args.to != "merl":
         raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl' only, found {args.to!r}")
     name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
@@ -135,4 +126,6 @@ def _run_rgl_export(args) -> int:
     return 0
 
 
-__all__ = ["add_export_parser", "run_export"]
+def add_parser(sub, common) -> None:
+    """The ``export`` command's parser."""
+    add_export_parser(sub, parents=[common]).set_defaults(func=run_export)

@@ -1,23 +1,23 @@
 """A streamed fit's geometry kept on disk beside the compilation cache: the first tall fit of a process on a grid
 it has seen before (a MERL material: every ``.binary`` file has the same directions, weights and mask) loads it.
 
-The geometry (:func:`polyjax._stream.stream_geometry`) of a grid is a few ``m x m`` matrices (the PCA and scaling,
+The geometry (:func:`polyjax._fit.stream.stream_geometry`) of a grid is a few ``m x m`` matrices (the PCA and scaling,
 the CholeskyQR2 factors, the SVD of ``R``, ``G``) besides the per-sample rows, which are recomputed from the
 directions inside the first fit's program, block by block before its pass over the values
-(:func:`polyjax._stream.kept_rows`). It is kept in ``<cache folder>/polyjax-geometry/``,
+(:func:`polyjax._fit.stream.kept_rows`). It is kept in ``<cache folder>/polyjax-geometry/``,
 the folder of JAX's persistent compilation cache when that is on (:func:`polyjax.enable_compilation_cache`; on by
 default in the command line), and never otherwise; ``POLYJAX_CACHE=off`` or ``POLYJAX_SAVED_GEOMETRY=off`` turns
 it off.
 
-Keyed by a hash of everything the geometry depends on: the CRC-32 of the bytes of the directions, weights and
-mask (which changes with any change of up to 32 adjacent bits, and by chance once in ``2^32`` otherwise; it costs
-about one and a half times the time to copy them; arrays a loader made from its own code, as the MERL grid's
-directions, are named instead, :func:`remember_content`), their shapes and dtypes, the fit's options and degrees, the
-versions of JAX and jaxlib and polyjax's source files. A file is used only when it holds that key, a checksum of
-its arrays that matches, the shapes and dtypes the geometry has, finite numbers, and the same samples used and
-total weight as the rows made in the fit's program (a fit whose rows disagree is thrown away); anything else (a
-missing, stale, damaged or foreign file) is ignored and the geometry is computed and written again. Nothing here is
-ever an error.
+Keyed by a hash of everything the geometry depends on: the CRC-32 of the bytes of the directions, weights and mask
+(which changes with any change of up to 32 adjacent bits, and by chance once in ``2^32`` otherwise; it costs about
+one and a half times the time to copy them; arrays a loader made from its own code, as the MERL grid's directions,
+are named instead, :func:`polyjax._cache.memo.remember_content`), their shapes and dtypes, the fit's options and
+degrees, the versions of JAX and jaxlib and polyjax's source files. A file is used only when it holds that key, a
+checksum of its arrays that matches, the shapes and dtypes the geometry has, finite numbers, and the same samples
+used and total weight as the rows made in the fit's program (a fit whose rows disagree is thrown away); anything
+else (a missing, stale, damaged or foreign file) is ignored and the geometry is computed and written again. Nothing
+here is ever an error.
 """
 
 from __future__ import annotations
@@ -25,10 +25,12 @@ from __future__ import annotations
 import hashlib
 import io
 import os
-import zlib
 from pathlib import Path
 
+import jax
 import numpy as np
+
+from .compilation import cache_disabled_by_env
 
 #: subfolder of the compilation cache folder holding the geometries
 FOLDER = "polyjax-geometry"
@@ -43,67 +45,16 @@ _OFF = ("off", "0", "no", "false", "none")
 def store_folder() -> Path | None:
     """``<compilation cache folder>/polyjax-geometry`` when JAX's persistent compilation cache is on and neither
     ``POLYJAX_CACHE`` nor ``POLYJAX_SAVED_GEOMETRY`` is off; else None."""
-    import jax
-
-    from ._cache import cache_disabled_by_env
-
     if os.environ.get(ENV, "").strip().lower() in _OFF or cache_disabled_by_env():
         return None
     folder = jax.config.jax_compilation_cache_dir
     return Path(folder) / FOLDER if folder else None
 
 
-def _fingerprint(a) -> str:
-    """The name :func:`remember_content` gave ``a``, else the CRC-32 of its bytes (read where they are)."""
-    hit = _CONTENT.get(id(a))
-    if hit is not None and hit[0]() is a:
-        return hit[1]
-    return f"{zlib.crc32(memoryview(np.ascontiguousarray(np.asarray(a))).cast('B')):08x}"
-
-
-_CONTENT: dict = {}
-
-
-def remember_content(a, what: str) -> None:
-    """Record that the device array ``a`` holds what ``what`` names, a deterministic function of polyjax's code (its
-    source files are in every key), e.g. the MERL loader's grid directions ``"merl-grid:(90, 90, 180):float64:u"``:
-    its fingerprint is then that name instead of a CRC of its bytes. Found by identity, forgotten with the array."""
-    import weakref
-
-    key = id(a)
-
-    def forget(ref):
-        if _CONTENT.get(key, (None,))[0] is ref:
-            del _CONTENT[key]
-
-    try:
-        _CONTENT[key] = (weakref.ref(a, forget), what)
-    except TypeError:  # no weak references: fingerprinted by its bytes
-        pass
-
-
-def geometry_key(inp, degrees, static: dict) -> str:
-    """The hash of everything the geometry of the prepared inputs ``inp`` depends on (module docstring)."""
-    import jax
-    import jaxlib
-
-    from ._aot import _source_stamp
-    from ._stream import BLOCK, PRECONDITION_CONDITION, PRECONDITION_STRIDE
-
-    arrays = (inp.u, inp.v, inp.weights, inp.mask)
-    parts = [jax.__version__, jaxlib.__version__, _source_stamp(), *(_fingerprint(a) for a in arrays),
-             repr(sorted(static.items())), repr([int(d) for d in degrees]),
-             repr((BLOCK, PRECONDITION_STRIDE, PRECONDITION_CONDITION))]
-    parts += [f"{a.shape}:{a.dtype}" for a in arrays]
-    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
-
-
 def template(k: int, m: int, n_degrees: int, dtype) -> dict:
     """The shapes and dtypes of the kept fields of a geometry with ``k`` components, ``m`` columns and
-    ``n_degrees`` degrees (those :func:`polyjax._stream.stream_geometry` returns; a test checks them against
+    ``n_degrees`` degrees (those :func:`polyjax._fit.stream.stream_geometry` returns; a test checks them against
     :func:`jax.eval_shape`), without tracing it."""
-    import jax
-
     f, i = np.dtype(dtype), np.dtype(jax.dtypes.canonicalize_dtype(np.int64))
     d, b = n_degrees, np.dtype(bool)
     shapes = dict(mean=((k,), f), rotation=((k, k), f), centre=((k,), f), halfwidth=((k,), f), g=((m, m), f),

@@ -27,7 +27,7 @@ import threading
 import jax
 from threadpoolctl import ThreadpoolController
 
-from ._errors import InputError
+from .._errors import InputError
 
 #: the environment variable: "1" (default), an integer, or "off"
 THREADS_ENV = "POLYJAX_LAPACK_THREADS"

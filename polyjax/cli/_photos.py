@@ -10,11 +10,16 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from pathlib import Path
 
 import numpy as np
+import png
+
+import polyjax as pj
 
 from .._errors import InputError
+from ..render._image import write_exr, write_png
 
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``)
 DEFAULTS = dict(variables="rusinkiewicz", degree=8, interactions=True, link="identity", weighting="brdf",
@@ -95,10 +100,6 @@ def _check_out_dir(path: str) -> Path:
 
 def run_fit_photos(args) -> int:
     """Run ``polyjax fit-photos``; returns the exit status."""
-    import time
-
-    import polyjax as pj
-
     save = _check_writable_file(args.save)
     capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
     t0 = time.perf_counter()
@@ -141,8 +142,6 @@ def errors_of(predicted, capture):
 
 def write_png16(path: Path, image) -> None:
     """An ``(H, W, 3)`` image in ``[0, 1]`` as a 16-bit linear RGB PNG (the inputs' format)."""
-    import png
-
     px = np.round(np.clip(np.asarray(image, np.float64), 0.0, 1.0) * 65535).astype(np.uint16)
     h, w, _ = px.shape
     with open(path, "wb") as fh:
@@ -151,10 +150,6 @@ def write_png16(path: Path, image) -> None:
 
 def run_relight(args) -> int:
     """Run ``polyjax relight``; returns the exit status."""
-    import polyjax as pj
-
-    from ._image import write_exr, write_png
-
     out_dir = _check_out_dir(args.out)
     model = pj.load_model(args.model)
     capture = pj.data.load_photometric(args.folder, parse_lights(args.lights))
@@ -181,5 +176,6 @@ def run_relight(args) -> int:
     return 0
 
 
-__all__ = ["DEFAULTS", "add_photo_parsers", "errors_of", "parse_lights", "run_fit_photos", "run_relight",
-           "write_png16"]
+def add_parser(sub, common) -> None:
+    """The parsers of ``fit-photos`` and ``relight``."""
+    add_photo_parsers(sub, parents=[common])

@@ -9,7 +9,8 @@ there, where in BRDF space a narrow peak needs a very high degree. The model is
 with ``P`` the polynomial of equation (3) (or of equation (2) with ``interactions=True``) in the
 principal components of the explanatory variables, and a small ``eps > 0`` (1/sr) so that values near 0
 are reachable. ``P`` is linear in its coefficients; ``f`` is not, so the fit is a short sequence of
-weighted linear least-squares solves, each one :func:`polyjax.fit_polynomial` call:
+weighted linear least-squares solves, each one closed-form fit (:func:`polyjax._fit.closed_form.fit_closed_form`, the
+kernel of :func:`polyjax.fit_polynomial`):
 
 1. **log-space start**: ``P`` fitted to ``z_i = log(max(b_i, 0) + eps)`` with weights
    ``w_i cos^2(theta_u,i) (b_i + eps)^q``, ``q = start_power = 1`` by default. Near the data
@@ -36,11 +37,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._errors import InputError
-from ._measurements import Measurements
-from ._metrics import fit_weights, l2_error
-from ._model import PolynomialBRDF
-from ._threads import one_lapack_thread
+from .._errors import InputError
+from .._measurements import Measurements
+from .._metrics import fit_weights, l2_error
+from .._model import PolynomialBRDF
+from .._solve.threads import one_lapack_thread
+from .closed_form import fit_closed_form
 
 #: the step lengths tried after every Gauss-Newton solve (0, the current model, is always a candidate)
 STEP_LENGTHS = (1.0, 0.5, 0.25)
@@ -133,16 +135,14 @@ def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):
 
 
 def _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, *, eps, steps, floor, start_power):
-    """The log-space start and the ``steps`` Gauss-Newton solves of the module docs, each a
-    :func:`polyjax.fit_polynomial` call with ``opts``; every step keeps the best of :data:`STEP_LENGTHS` and no
-    step by the L2 of equation (11)."""
-    from ._fit import fit_polynomial
-
+    """The log-space start and the ``steps`` Gauss-Newton solves of the module docs, each a closed-form fit
+    (:func:`polyjax._fit.closed_form.fit_closed_form`) with ``opts``; every step keeps the best of
+    :data:`STEP_LENGTHS` and no step by the L2 of equation (11)."""
     keep = fit_weights(u, v, w, mask, cutoff_deg)[0] > 0  # the fitted samples; the model may overflow elsewhere
 
     def solve(target, wt):
         ok = keep & jnp.isfinite(target) & jnp.isfinite(wt)
-        return fit_polynomial(u, v, jnp.where(ok, target, 0.0), weights=jnp.where(ok, wt, 0.0), **opts)
+        return fit_closed_form(u, v, jnp.where(ok, target, 0.0), weights=jnp.where(ok, wt, 0.0), **opts)
 
     def score(model):
         return l2_error(values, model(u, v), u, v, w, cutoff_deg, mask)

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import logging
 import os
-import sys
-import threading
 from pathlib import Path
+
+import jax
+import jax.monitoring
+
+from .._errors import InputError
 
 #: environment variable naming the cache folder; empty, ``off``, ``0``, ``no`` or ``false`` disables the cache
 CACHE_ENV = "POLYJAX_CACHE"
@@ -55,10 +58,6 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     Raises:
         InputError: ``path`` exists and is not a folder, or cannot be created.
     """
-    import jax
-
-    from ._errors import InputError
-
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
     if folder.exists() and not folder.is_dir():
         raise InputError(f"cache folder {str(folder)!r}: exists and is not a folder")
@@ -71,7 +70,7 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     try:  # a cache already initialised (a program compiled before this call) keeps its old folder otherwise
-        from jax._src import compilation_cache
+        from jax._src import compilation_cache  # private JAX API: imported only to reset an initialised cache
 
         if compilation_cache.is_initialized():
             compilation_cache.reset_cache()
@@ -106,7 +105,6 @@ def _listen() -> None:
     global _listening
     if _listening:
         return
-    import jax.monitoring
 
     def on_event(event: str, **_) -> None:
         if event == "/jax/compilation_cache/compile_requests_use_cache":
@@ -121,57 +119,11 @@ def _listen() -> None:
     _listening = True
 
 
-class compile_notice:
-    """Context manager: one line on stderr when the block is still compiling after ``delay`` seconds.
+def listen_for_misses() -> None:
+    """Start counting the persistent cache's misses (idempotent): :func:`cache_misses` then reports them."""
+    _listen()
 
-    The command line wraps its fits in it, so that the seconds JAX spends compiling a program for new shapes are
-    not silence. With the cache on, the line appears only while a program that the cache did not hold is being
-    compiled: after JAX's cache has missed a program (it logs the miss, then compiles), never while it merely reads
-    programs it holds (a warm run that is slow, or loads large programs, stays quiet); with the cache off, whenever
-    the block takes longer than ``delay`` (default 1 s, ``$POLYJAX_COMPILE_NOTICE_SECS``): every program is then
-    compiled. At most one line per process.
-    """
 
-    printed = False
-
-    def __init__(self, what: str, cache: Path | None, delay: float | None = None, stream=None):
-        self.what, self.cache = what, cache
-        self.delay = float(os.environ.get("POLYJAX_COMPILE_NOTICE_SECS", 1.0)) if delay is None else float(delay)
-        self.stream = stream
-        self._done = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def _compiling(self) -> bool:
-        return self.cache is None or _counts["misses"] > 0
-
-    def _watch(self) -> None:
-        if self._done.wait(self.delay):
-            return
-        while not compile_notice.printed:
-            if self._compiling():
-                self._say()
-                return
-            if self._done.wait(0.1):
-                return
-
-    def _say(self) -> None:
-        compile_notice.printed = True
-        where = (f"kept in {self.cache} for later runs" if self.cache is not None
-                 else "the compilation cache is off, so every process compiles again")
-        stream = self.stream if self.stream is not None else sys.stderr
-        print(f"polyjax: compiling {self.what} for these shapes and options (once per machine; {where}) ...",
-              file=stream, flush=True)
-
-    def __enter__(self):
-        if not compile_notice.printed:
-            if self.cache is not None:
-                _listen()
-            self._thread = threading.Thread(target=self._watch, daemon=True)
-            self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._done.set()
-        if self._thread is not None:
-            self._thread.join()
-        return False
+def cache_misses() -> int:
+    """How many programs JAX's persistent cache did not hold since :func:`listen_for_misses` (each one compiled)."""
+    return _counts["misses"]

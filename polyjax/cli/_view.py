@@ -7,10 +7,17 @@ import contextlib
 import io
 import sys
 
+import numpy as np
+
+import polyjax as pj
+
+from .._config import check_output_file, configured_data_root
+from .._errors import InputError
+from ..view._page import ViewSettings, write_page
+from ..view._serve import serve_page
+
 
 def _resolution(text: str) -> tuple[int, int, int]:
-    from .._errors import InputError
-
     try:
         res = tuple(int(x) for x in text.split(","))
     except ValueError:
@@ -46,13 +53,8 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
 
 
 def run_view(args) -> int:
-    from .._outputs import check_output_file
-    from ._page import ViewSettings, write_page
-    from ._serve import serve_page
-
     out = check_output_file(args.out, "--out")
     if args.serve and not 0 <= args.port <= 65535:  # checked before any work
-        from .._errors import InputError
 
         raise InputError(f"--port: expected 0 (any free port) or a port in [1, 65535], found {args.port}")
     settings = ViewSettings(size=args.size, exposure=args.exposure, environment=args.environment)
@@ -78,14 +80,6 @@ def report_page(args, report) -> int:
     """``polyjax report --html PATH``: run ``report(args)`` (its text printed as usual and kept), then write the page
     of its data (the first material; CUReT sample 25 with a data root) with the report's three polynomial models
     fitted to it (Ashikhmin-Shirley p = 5, Lafortune p = 7, Ward p = 7) and the report's text under the views."""
-    import numpy as np
-
-    import polyjax as pj
-
-    from .._config import configured_data_root
-    from .._outputs import check_output_file
-    from ._page import ViewSettings, write_page
-
     out = check_output_file(args.html, "--html")
     text = io.StringIO()
     with contextlib.redirect_stdout(_Tee(sys.stdout, text)):
@@ -103,4 +97,6 @@ def report_page(args, report) -> int:
     return status
 
 
-__all__ = ["add_view_parser", "report_page", "run_view"]
+def add_parser(sub, common) -> None:
+    """The ``view`` command's parser."""
+    add_view_parser(sub, parents=[common])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import weakref
 from typing import Sequence
 
 import jax
@@ -11,20 +10,28 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from . import _geometry_store as store
-from ._basis import BASES, n_terms, term_degrees
-from ._design import fitted_design
-from ._errors import InputError
-from ._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
-from ._lstsq import METHODS, weighted_lstsq
-from ._measurements import Measurements
-from ._metrics import fit_weights
-from ._model import PolynomialBRDF
-from ._results import Result, raise_on_status
-from ._sharding import lane_sharding, shard_lanes
-from ._stream import kept_rows, sampled_rows, stream_geometry, streamed_lane, use_stream
-from ._threads import one_lapack_thread
-from ._variables import get_variables
+from .._basis import BASES, n_terms, term_degrees
+from .._cache import geometry as store
+from .._cache import memo
+from .._cache.keys import geometry_key
+from .._design import fitted_design
+from .._errors import InputError
+from .._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
+from .._measurements import Measurements
+from .._metrics import fit_weights
+from .._model import PolynomialBRDF
+from .._results import Result, raise_on_status
+from .._solve.lstsq import METHODS, weighted_lstsq
+from .._variables import get_variables
+from . import stream as streaming
+from .sharding import lane_sharding, shard_lanes
+from .stream import (
+    kept_rows,
+    sampled_rows,
+    stream_geometry,
+    streamed_lane,
+    use_stream,
+)
 
 #: lanes fitted at once (``vmap``) inside the loop over blocks of lanes (``lax.map``) of the per-lane path
 LANE_BLOCK = 1024
@@ -38,7 +45,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
                 batch, scalar, stream=False, geometry=None, lane_block=LANE_BLOCK):
     """Every lane of ``inp`` for every degree of ``degrees (D,)`` -> dict of ``(D, *batch, ...)`` arrays
     (``(*batch, ...)`` when ``scalar``; ``(D, B, ...)``, the lanes flat, when ``batch`` is None: a sharded fit's
-    block of lanes); ``stream``: the shared design is streamed (:mod:`polyjax._stream`), from ``geometry``
+    block of lanes); ``stream``: the shared design is streamed (:mod:`polyjax._fit.stream`), from ``geometry``
     (:func:`_geometry_kernel`) when given.
 
     Lanes with samples of their own (per-lane weights, masks or directions) are fitted group by group (a group:
@@ -57,7 +64,7 @@ def _fit_kernel(inp: PreparedInputs, degrees, *, variables, max_degree, basis, i
     else:
         fitted = _fit_groups(inp, active.shape[0], lane, variables=variables, cutoff_deg=cutoff_deg,
                              lane_block=lane_block)
-    out = _outputs(inp, degrees, *fitted)
+    out = _result_fields(inp, degrees, *fitted)
     if batch is None:  # a sharded fit's block of lanes: (D, B_local, ...), reshaped outside the shard_map
         return out
     lead = () if scalar else (degrees.shape[0],)  # (D, B, ...) -> (D?, *batch, ...) inside the program
@@ -146,7 +153,7 @@ def _fit_groups(inp, n_deg, lane, *, variables, cutoff_deg, lane_block):
     return tr, coef, l2, rank, cond, n_act, n_used
 
 
-def _outputs(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
+def _result_fields(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
     """The fields of :class:`polyjax.PolynomialBRDF` as ``(D, B, ...)`` arrays, with the :class:`polyjax.Result`
     code of every lane; a failed lane (no samples, non-finite values) has zero coefficients and L2 ``inf``."""
     n_deg, nb = l2.shape
@@ -167,22 +174,22 @@ def _outputs(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
 
 
 def _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg):
-    """:func:`polyjax._stream.stream_geometry` of the shared samples of ``inp``, their variables and weights made in
-    one loop over the directions (:func:`polyjax._stream.sampled_rows`)."""
+    """:func:`polyjax._fit.stream.stream_geometry` of the shared samples of ``inp``, their variables and weights made in
+    one loop over the directions (:func:`polyjax._fit.stream.sampled_rows`)."""
     xt, w, wc2 = sampled_rows(_sample_rows(variables, cutoff_deg), (inp.u, inp.v, inp.weights[0], inp.mask[0]))
     return stream_geometry(xt.T, w, wc2, active, max_degree=max_degree, basis=basis, interactions=interactions)
 
 
 @functools.partial(jax.jit, static_argnames=("variables", "max_degree", "basis", "interactions", "cutoff_deg"))
 def _geometry_kernel(inp, degrees, *, variables, max_degree, basis, interactions, cutoff_deg):
-    """The values-independent half of a streamed fit (:func:`polyjax._stream.stream_geometry`), compiled alone."""
+    """The values-independent half of a streamed fit (:func:`polyjax._fit.stream.stream_geometry`), compiled alone."""
     k = get_variables(variables).k
     active = jnp.asarray(term_degrees(k, max_degree, interactions))[None, :] <= degrees[:, None]
     return _geometry(inp, active, variables, max_degree, basis, interactions, cutoff_deg)
 
 
 def _sample_rows(variables, cutoff_deg):
-    """``(u, v, w, mask) -> (x, w, w cos^2 theta_u)`` of a block of samples (:func:`polyjax._stream.kept_rows`)."""
+    """``(u, v, w, mask) -> (x, w, w cos^2 theta_u)`` of a block of samples (:func:`polyjax._fit.stream.kept_rows`)."""
     var_fn = get_variables(variables).fn
 
     def sample(u, v, w, m):
@@ -196,7 +203,7 @@ def _sample_rows(variables, cutoff_deg):
                                              "cutoff_deg", "batch", "scalar", "lane_block"))
 def _kept_fit_kernel(inp: PreparedInputs, degrees, kept: dict, *, variables, cutoff_deg, **static):
     """The first streamed fit on a geometry kept on disk (its small fields ``kept``), in one program: the per-sample
-    rows from the kept transform (:func:`polyjax._stream.kept_rows`), then :func:`_fit_kernel` on the completed
+    rows from the kept transform (:func:`polyjax._fit.stream.kept_rows`), then :func:`_fit_kernel` on the completed
     geometry. Returns ``(outputs, rows)``; the caller uses the outputs only if the rows' samples used and total
     weight are the kept geometry's (:func:`_streamed_fit`)."""
     rows = kept_rows(_sample_rows(variables, cutoff_deg), (inp.u, inp.v, inp.weights[0], inp.mask[0]),
@@ -211,20 +218,25 @@ def _kept_rows_match(rows, kept) -> bool:
     return int(rows["n_used"]) == int(kept["n_used"]) and np.allclose(rows["den"], kept["den"], rtol=1e-12, atol=0)
 
 
+def _stream_constants() -> tuple:
+    """The streaming constants a kept geometry depends on (part of its key), read when the key is made."""
+    return (streaming.BLOCK, streaming.PRECONDITION_STRIDE, streaming.PRECONDITION_CONDITION)
+
+
 def _streamed_fit(inp, degrees, *, static, **options) -> dict:
     """:func:`_fit_kernel` streamed, on the geometry of these samples and options: the one this process made last
-    (:func:`_remembered_geometry`), else the one kept on disk when the compilation cache is on
-    (``polyjax/_geometry_store.py``: found by a hash of everything it depends on, checked, never trusted
+    (:func:`polyjax._cache.memo.remembered_geometry`), else the one kept on disk when the compilation cache is on
+    (``polyjax/_cache/geometry.py``: found by a hash of everything it depends on, checked, never trusted
     otherwise; its per-sample rows are made inside the fit's program, :func:`_kept_fit_kernel`, and the fit is kept
     only if they have the samples used and total weight of the kept geometry), else a new one (written there)."""
     degrees = np.asarray(degrees, np.int32)
     kernel = functools.partial(_fit_kernel, method=options["method"], rcond=options["rcond"], batch=inp.batch,
                                scalar=options["scalar"], lane_block=options["lane_block"], **static)
-    geo = _remembered_geometry(inp, degrees, static)
+    geo = memo.remembered_geometry(inp, degrees, static)
     if geo is not None:
         return kernel(inp, degrees, stream=True, geometry=geo)
     folder = store.store_folder()
-    key = None if folder is None else store.geometry_key(inp, degrees, static)
+    key = None if folder is None else geometry_key(inp, degrees, static, _stream_constants())
     if key is not None:
         k = get_variables(static["variables"]).k
         m = n_terms(k, static["max_degree"], static["interactions"])
@@ -233,52 +245,18 @@ def _streamed_fit(inp, degrees, *, static, **options) -> dict:
             kept = {f: jnp.asarray(a) for f, a in kept.items()}
             out, rows = _kept_fit_kernel(inp, degrees, kept, batch=inp.batch, **options, **static)
             if _kept_rows_match(rows, kept):
-                _remember_geometry(inp, degrees, static, {**kept, "t": rows["t"], "wc2": rows["wc2"]})
+                memo.remember_geometry(inp, degrees, static, {**kept, "t": rows["t"], "wc2": rows["wc2"]})
                 return out
     geo = _geometry_kernel(inp, degrees, **static)
-    _remember_geometry(inp, degrees, static, geo)
+    memo.remember_geometry(inp, degrees, static, geo)
     out = kernel(inp, degrees, stream=True, geometry=geo)
     if key is not None:  # written while the fit runs (the kernel returns before its result is ready)
         store.save(folder, key, geo)
     return out
 
 
-_GEOMETRY_MEMO: dict = {}
-
-
-def _memo_key(degrees, static):
-    return (tuple(int(d) for d in degrees), tuple(sorted(static.items())))
-
-
-def _remembered_geometry(inp, degrees, static):
-    """The geometry :func:`_remember_geometry` kept for the same samples (the same direction arrays by identity,
-    equal weights and mask) and options, or None."""
-    hit = _GEOMETRY_MEMO.get("last")
-    if (hit is not None and hit["key"] == _memo_key(degrees, static) and hit["u"]() is inp.u
-            and hit["v"]() is inp.v and _same(hit["w"], inp.weights) and _same(hit["m"], inp.mask)):
-        return hit["geo"]
-    return None
-
-
-def _same(kept, a) -> bool:
-    return kept is a or np.array_equal(np.asarray(kept), np.asarray(a))
-
-
-def _remember_geometry(inp, degrees, static, geo) -> None:
-    """Keep ``geo`` for the next fit on the same samples and options: one entry, the last one (its weights and mask
-    kept as they are when they are JAX arrays, which never change, else copied)."""
-    if not is_concrete(geo):
-        return
-    keep = lambda a: a if isinstance(a, jax.Array) else np.array(a)  # noqa: E731
-    try:
-        _GEOMETRY_MEMO["last"] = dict(key=_memo_key(degrees, static), u=weakref.ref(inp.u),
-                                      v=weakref.ref(inp.v), w=keep(inp.weights), m=keep(inp.mask), geo=geo)
-    except TypeError:  # arrays without weak references: not remembered
-        _GEOMETRY_MEMO.pop("last", None)
-
-
-def _check_options(basis, method, rank_deficient, degree, lane_block):
-    """The options of :func:`fit_polynomial` checked; the degrees as a ``(D,)`` integer array."""
+def check_fit_options(basis, method, rank_deficient, degree, lane_block):
+    """The options of :func:`polyjax.fit_polynomial` checked; the degrees as a ``(D,)`` integer array."""
     if basis not in BASES:
         raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
     if method not in METHODS:
@@ -293,8 +271,7 @@ def _check_options(basis, method, rank_deficient, degree, lane_block):
     return degrees
 
 
-@one_lapack_thread
-def fit_polynomial(
+def fit_closed_form(
     u,
     v: ArrayLike | None = None,
     values: ArrayLike | None = None,
@@ -312,83 +289,14 @@ def fit_polynomial(
     nonfinite: str = "error",
     throw: bool = False,
     lane_block: int = LANE_BLOCK,
-    link: str = "identity",
-    eps: float = 1e-3,
-    steps: int = 3,
 ) -> PolynomialBRDF:
-    r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form. (Over 80 lines because
-    this docstring documents every argument; the body is four named steps: checks, :func:`polyjax.prepare_inputs`,
-    the compiled kernel, the result.)
-
-    Minimises the Ngan et al. objective of equation (11),
-    ``sum_i w_i cos^2(theta_u,i) (b_i - f(u_i, v_i))^2``, over the samples with ``theta_u`` and
-    ``theta_v`` at most ``cutoff_deg``. The explanatory variables (section 3) are transformed to
-    principal components over those samples, the design of equation (13) is built, and the
-    solve is QR + SVD of the square-root-weighted design (:func:`polyjax.weighted_lstsq`).
-    Inputs follow the rules every fitter shares (``polyjax/_inputs.py``); the fit is differentiable and
-    batches under ``jit``/``vmap`` (``throw`` then raises through :func:`equinox.error_if`).
-
-    Args:
-        u: ``(n, 3)`` light directions, or a :class:`polyjax.Measurements` (then ``v``/``values``
-           and its ``weights``/``mask`` are taken from it), or ``(*dbatch, n, 3)``: directions of their own for
-           every lane (each texel of a capture), ``dbatch`` a leading part of the batch shape of ``values``
-           (``values (H, W, 3, n)``, ``u (H, W, n, 3)``: a texel's channels share its directions and its design).
-           Each such lane gets its own PCA and design, exactly as if fitted alone.
-        v: view directions, the shape of ``u``.
-        values: ``(*batch, n)`` measured BRDF, samples last; every leading axis (materials, channels)
-           is fitted independently in the same call.
-           The fit runs in the dtype of ``values`` (float32 or float64; integers are converted to the
-           default float, float16/bfloat16 to float32; complex values are rejected).
-        variables: a registered variable set: ``"ward"``, ``"ashikhmin-shirley"``, ``"lafortune"``,
-           ``"lafortune-anisotropic"`` or a user's own.
-        degree: ``p``, or a sequence of degrees: the result then has a leading degree axis.
-        weights: solid-angle weights ``w_i`` (``(n,)`` or ``(*batch, n)``; ``(*dbatch, n)`` with per-lane
-           directions), ones by default.
-        mask: ``(n,)`` (shared by every lane) or ``(*batch, n)`` (``(*dbatch, n)``) validity mask; False samples
-           are not fitted.
-        cutoff_deg: grazing cutoff in degrees (80 in the paper); None keeps all samples above the horizon.
-        basis: ``"legendre"`` (default, well conditioned) or ``"monomial"`` (the paper's literal powers);
-           both span the same space and give the same fit.
-        interactions: fit the full response surface of equation (2) instead of equation (3).
-        method: ``"qr"`` (default) or ``"svd"``.
-        rcond: relative singular-value cutoff for the rank; default ``eps * max(m, sqrt(n))``.
-        rank_deficient: ``"flag"`` (minimum-norm solution, ``status = RANK_DEFICIENT``) or ``"error"``
-           (the same as ``throw=True``).
-        nonfinite: ``"error"`` (raise on NaN/inf in ``values`` where the mask is True; under an outer ``jit``,
-           where nothing can be raised before the fit, such a lane is flagged ``NONFINITE``) or ``"mask"``
-           (drop those samples).
-        throw: raise :class:`polyjax.FitError` naming the first lane whose status is not ``OK``
-           (rank-deficient, no samples, non-finite values or L2); under ``jit`` an
-           :func:`equinox.error_if` error with that code's message. Lanes with no samples are always
-           ``NO_SAMPLES`` (L2 = inf); a lane whose L2 overflows is ``NONFINITE``.
-        lane_block: lanes fitted at once when lanes have samples of their own (per-lane weights, masks or
-           directions): a :func:`jax.lax.map` over blocks of lanes, ``vmap`` inside a block, so memory grows with
-           the block (about ``lane_block * n * m`` floats), not with the batch. Same results for any block size.
-
-        link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
-           weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
-           is equation (3) itself.
-
-    Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
-    e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
-    (:func:`jax.shard_map`), and the result comes back sharded the same way (``docs/scale.md``).
-
-    Returns:
-        :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
-        degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.Result` codes.
-    """
-    if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_logfit.py
-        if link != "log" or nonfinite != "error":
-            raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
-        from ._logfit import fit_log_polynomial
-
-        return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
-                                  cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
-                                  rcond=rcond, rank_deficient=rank_deficient)
+    """The closed-form fit of equation (3) (:func:`polyjax.fit_polynomial` with ``link="identity"``, its arguments):
+    the options checked, :func:`polyjax.internal.prepare_inputs`, the compiled kernel (dense, streamed or sharded:
+    :func:`_run_kernel`), the result; the building block of every polynomial fit (the log-space fit's solves too)."""
     if isinstance(u, Measurements) and isinstance(v, str):
         u, v, variables = u, None, v
     vs = get_variables(variables)
-    degrees = _check_options(basis, method, rank_deficient, degree, lane_block)
+    degrees = check_fit_options(basis, method, rank_deficient, degree, lane_block)
     sharded = _input_sharding(u, v, values, weights, mask)
     inp, cutoff = prepare_inputs("fit_polynomial", u, v, values, weights, mask, cutoff_deg=cutoff_deg,
                                  nonfinite=nonfinite, lane_directions=True)
@@ -407,8 +315,8 @@ def fit_polynomial(
 
 def _run_kernel(inp: PreparedInputs, degrees, sharded, m: int, *, scalar, method, rcond, lane_block, static) -> dict:
     """:func:`_fit_kernel` on prepared inputs: on the devices the inputs are sharded over (each its own lanes,
-    dense; the result stays sharded, ``polyjax/_sharding.py``), or in one program, streamed when the shared design
-    is tall (``polyjax/_stream.py``); the fields of the result, shaped ``(D?, *batch, ...)``."""
+    dense; the result stays sharded, ``polyjax/_fit/sharding.py``), or in one program, streamed when the shared design
+    is tall (``polyjax/_fit/stream.py``); the fields of the result, shaped ``(D?, *batch, ...)``."""
     if sharded is None:
         # streamed only on the shared design (one set of samples for every lane, never per-lane directions)
         stream = use_stream(inp.n, m, int(np.prod(inp.batch, dtype=int)), method, inp.shared,
@@ -437,7 +345,7 @@ def _raise_on_status(model: PolynomialBRDF) -> PolynomialBRDF:
 
 
 def _input_sharding(u, v, values, weights, mask):
-    """The mesh and lane axes of inputs sharded over their leading batch axis (``polyjax/_sharding.py``)."""
+    """The mesh and lane axes of inputs sharded over their leading batch axis (``polyjax/_fit/sharding.py``)."""
     if isinstance(u, Measurements):
         u, v, values = u.u, u.v, u.values
     if values is None or not hasattr(values, "shape"):
@@ -445,8 +353,3 @@ def _input_sharding(u, v, values, weights, mask):
     nb = np.ndim(values) - 1
     return lane_sharding(nb, {"values": (values, 1), "u": (u, 2), "v": (v, 2), "weights": (weights, 1),
                               "mask": (mask, 1)})
-
-
-def n_parameters(variables: str, degree: int, interactions: bool = False) -> int:
-    """``k p + 1`` for a variable set (equation (3)); ``C(k + p, p)`` with interactions (equation (2))."""
-    return n_terms(get_variables(variables).k, degree, interactions)

@@ -7,7 +7,7 @@ Minimises :math:`\sum_i w_i (y_i - D_i \beta)^2` without forming the normal equa
 2. Householder QR of the augmented matrix ``[A | sqrt(w) Y]`` (``R`` only, ``Q`` never formed),
    which yields ``R`` and ``Q^T sqrt(w) Y`` in one pass over the data; for very tall designs
    (MERL: a million rows) CholeskyQR2 gives the same ``R`` and ``Q^T sqrt(w) Y`` with two matrix
-   products (:mod:`polyjax._linalg`), falling back to Householder if the Cholesky factor fails;
+   products (:mod:`polyjax._solve.linalg`), falling back to Householder if the Cholesky factor fails;
 3. SVD of the small ``m x m`` triangle ``R = U S V^T``, giving the rank, the 2-norm condition
    number ``s_max / s_min`` and the minimum-norm solution ``beta = V S^+ U^T Q^T sqrt(w) y``.
 
@@ -26,12 +26,12 @@ import numpy as np
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float, Int
 
-from ._linalg import qr_r, svd, tall_qr
-from ._threads import one_lapack_thread
+from .linalg import qr_r, svd, tall_qr
+from .threads import one_lapack_thread
 
 METHODS = ("qr", "svd")
 #: designs with at least this many rows (and 8 times more rows than columns) take the Gram-based
-#: CholeskyQR2 path of :func:`polyjax._linalg.tall_qr` (one matrix product instead of ``m`` passes).
+#: CholeskyQR2 path of :func:`polyjax._solve.linalg.tall_qr` (one matrix product instead of ``m`` passes).
 TALL_ROWS = 20_000
 
 
@@ -168,7 +168,7 @@ def _factor(design, y2, weights, act, method, rcond):
 def _solve_svd(uu, s, vt, utb, scale, act, n, rcond):
     """Minimum-norm coefficients, rank and condition from the SVD ``U S V^T`` of ``R`` (or of ``A``) and ``U^T b``.
 
-    Shared by the dense solve above and the streamed fit (:mod:`polyjax._stream`), which builds ``R`` and
+    Shared by the dense solve above and the streamed fit (:mod:`polyjax._fit.stream`), which builds ``R`` and
     ``Q^T b`` without ever holding the design.
     """
     m = vt.shape[0]

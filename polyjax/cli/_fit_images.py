@@ -10,7 +10,15 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
+import polyjax as pj
+
+from .._config import check_model_file, check_output_dir
 from .._errors import InputError
+from ..render import Camera, DirectionalLight, Lambertian, Plane, PointLight, Scene, Sphere, load_envmap, read_exr
+from ..render._example_scene import write_example_scene
+from ._args import strict_json
 
 
 def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
@@ -48,8 +56,6 @@ def _field(d: dict, key: str, where: str, default=None, required=False):
 
 def load_scene_json(path: str | Path):
     """Read a ``fit-images`` JSON description: ``(scenes, images, target)``."""
-    from . import Camera, DirectionalLight, Lambertian, Plane, PointLight, Scene, Sphere, load_envmap, read_exr
-
     path = Path(path)
     try:
         spec = json.loads(path.read_text())
@@ -118,15 +124,7 @@ def load_scene_json(path: str | Path):
 
 def run_fit_images(args) -> int:
     """Run ``polyjax fit-images`` from parsed arguments; returns the exit status."""
-    import numpy as np
-
-    import polyjax as pj
-
-    from .._outputs import check_model_file, check_output_dir, strict_json
-
     if args.example is not None:
-        from ._example_scene import write_example_scene
-
         path = write_example_scene(check_output_dir(args.example, "--example"))
         print(f"example written to {path}; fit it with: polyjax fit-images {path}")
         return 0
@@ -159,4 +157,6 @@ def run_fit_images(args) -> int:
     return 0 if all(s == "OK" for s in status) else 1
 
 
-__all__ = ["add_fit_images_parser", "load_scene_json", "run_fit_images"]
+def add_parser(sub, common) -> None:
+    """The ``fit-images`` command's parser."""
+    add_fit_images_parser(sub, parents=[common])

@@ -1,7 +1,7 @@
 r"""Streamed fits of tall data (a MERL material: a million samples): the design is never held in memory.
 
 The dense fit builds the ``n x m`` design ``D``, weights it, and factorises it by CholeskyQR2
-(:func:`polyjax._linalg.tall_qr`). For a million rows that design, and the ``Q_1`` of CholeskyQR2, are each
+(:func:`polyjax._solve.linalg.tall_qr`). For a million rows that design, and the ``Q_1`` of CholeskyQR2, are each
 ``8 n m`` bytes written and read again several times. Here every pass rebuilds the rows it needs, a block of
 :data:`BLOCK` rows at a time inside one compiled loop, from the scaled principal components ``t``
 (``k <= 3`` numbers per sample, held as ``(k, n)``: every column of a block is a contiguous, vectorised run),
@@ -38,7 +38,7 @@ Values (:func:`streamed_lane`, two passes that read ``t``, the weights and the v
 
 Every degree of a batched fit shares the passes (columns are switched off per degree). When a Cholesky factor
 fails (a rank-deficient or badly conditioned design), the fit is done by the dense path instead, inside the same
-program, as :func:`~polyjax._linalg.tall_qr` falls back to Householder QR.
+program, as :func:`~polyjax._solve.linalg.tall_qr` falls back to Householder QR.
 
 Not differentiable: the loops have no derivative rule. :func:`polyjax.fit_polynomial` takes this path only for
 concrete inputs (a call outside ``jit``/``grad``/``vmap``); traced inputs take the dense, differentiable path.
@@ -49,11 +49,11 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._basis import exponents
-from ._design import range_scaling
-from ._linalg import svd
-from ._lstsq import _solve_svd
-from ._pca import pca_from_covariance
+from .._basis import exponents
+from .._design import range_scaling
+from .._pca import pca_from_covariance
+from .._solve.linalg import svd
+from .._solve.lstsq import _solve_svd
 
 #: shared-design fits with at least this many samples (and 8 times more than columns plus right-hand sides)
 #: are streamed
@@ -204,7 +204,7 @@ def _root_weights(wc2l):
 
 def stream_rows(x, wl, wc2l, mean, rotation, centre, halfwidth):
     """The per-sample part of :func:`stream_geometry` given its transform (a geometry kept on disk,
-    :mod:`polyjax._geometry_store`), of the samples ``x`` (a block of them in :func:`kept_rows`): ``t (k, n)``,
+    :mod:`polyjax._cache.geometry`), of the samples ``x`` (a block of them in :func:`kept_rows`): ``t (k, n)``,
     ``sqrt(w cos^2 theta_u)`` and its square, and the samples used and their weight (checked against the kept
     geometry's)."""
     pos = wc2l > 0
@@ -230,7 +230,7 @@ def sampled_rows(sample, arrays, *, block=None):
 def kept_rows(sample, arrays, mean, rotation, centre, halfwidth, *, block=None):
     """:func:`stream_rows` of every sample, a block of :data:`BLOCK` rows at a time inside one loop (over the whole
     arrays at once, XLA read the directions several times, at half the speed): the rows a geometry kept on disk
-    (:mod:`polyjax._geometry_store`) needs, from its transform.
+    (:mod:`polyjax._cache.geometry`) needs, from its transform.
 
     Args:
         sample: ``(*blocks) -> (x (B, k), w (B,), w cos^2 theta_u (B,))``, the explanatory variables and weights of
@@ -316,7 +316,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
         per degree the column norms ``E``, ``R_1^{-1}``, ``R_2`` (``R = R_2 R_1``), the SVD of ``R``, whether
         the Cholesky factors succeeded, the number of passes over the rows (1 to 3) and whether the preconditioner
         came from the sample of the rows. The same for every material on one grid: :func:`polyjax.fit_polynomial`
-        keeps the last one (and :mod:`polyjax._geometry_store` all but the per-sample arrays, on disk).
+        keeps the last one (and :mod:`polyjax._cache.geometry` all but the per-sample arrays, on disk).
     """
     block = BLOCK if block is None else int(block)
     stride = PRECONDITION_STRIDE if stride is None else int(stride)
@@ -406,7 +406,7 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
         block: rows per block (default :data:`BLOCK`).
 
     Returns:
-        The outputs of the dense fit of ``polyjax._fit``: ``((mean, rotation, centre, halfwidth), coef (D, r, m),
+        The outputs of the dense fit of ``polyjax._fit.closed_form``: ``((mean, rotation, centre, halfwidth), coef (D, r, m),
         l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
     """
     block = BLOCK if block is None else int(block)
