@@ -38,14 +38,13 @@ from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
-from ._joint import SUFFIX
-from ._multistart import fit_kernel
-from ._registry import get_model
+from ._jaxopt import staged_kernel
+from ._models.joint import SUFFIX
+from ._models.registry import get_model
+from ._models.zernike import fit_zernike
+from ._multistart import BACKENDS, fit_kernel
 from ._result import BaselineFit
-from ._solvers import BACKENDS
-from ._staged import staged_kernel
 from ._starts import check_n_starts
-from ._zernike import fit_zernike
 
 
 @one_lapack_thread
@@ -93,7 +92,7 @@ def fit(
         n_starts: number of starting points per lane (deterministic guesses first, then random).
         key: ``jax.random.PRNGKey`` for the random starts (``PRNGKey(0)`` when None).
         backend: ``"optimistix"`` (``optimistix.LevenbergMarquardt``) or ``"jaxopt"``
-            (``jaxopt.LevenbergMarquardt``, imported only when asked for).
+            (``jaxopt.LevenbergMarquardt``).
         max_steps: step limit per start (both stages together).
         limit_steps: steps given to a kept start that ran out of steps next to its range limits,
             once put on them (at most twice, so up to ``2 * limit_steps`` beyond ``max_steps``);

@@ -34,7 +34,7 @@ from polyjax import InputError, Result, one_lapack_thread, raise_on_status
 
 from ._fit import fit
 from ._light_sums import light_sum_kernel, package
-from ._registry import get_model
+from ._models.registry import get_model
 from ._result import BaselineFit
 from ._starts import check_n_starts
 

@@ -12,10 +12,10 @@ import polyjax as pj
 from polyjax import InputError, Result
 
 from ._implicit import implicit_optimum
-from ._joint import SUFFIX, channel_index, joint_lanes, per_channel
+from ._jaxopt import staged_kernel
+from ._models.joint import SUFFIX, channel_index, joint_lanes, per_channel
+from ._models.registry import get_model
 from ._multistart import fit_kernel
-from ._registry import get_model
-from ._staged import staged_kernel
 
 
 def check_channels(model, batch: tuple) -> None:

@@ -28,8 +28,8 @@ from polyjax import Result
 
 from ._implicit import implicit_least_squares, safe_sqrt
 from ._lm import lm_solve
-from ._registry import get_model
-from ._staged import _LIMIT_TOL, _at, _pick
+from ._models.registry import get_model
+from ._multistart import _LIMIT_TOL, _at, _pick
 from ._starts import _linear_seed, _nonlinear_starts
 
 _UP = (0.0, 0.0, 1.0)

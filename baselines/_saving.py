@@ -12,7 +12,7 @@ from polyjax import register_model_kind
 from polyjax._io import module_kind
 
 from ._fit import fit
-from ._registry import MODELS
+from ._models.registry import MODELS
 from ._result import BaselineFit, BaselineStatus
 
 

@@ -14,8 +14,8 @@ from jaxtyping import Array, Float
 import polyjax as pj
 from polyjax import InputError
 
-from ._common import BaselineModel
-from ._registry import get_model
+from ._models.common import BaselineModel
+from ._models.registry import get_model
 
 
 def _linear_seed(cols, y, wc2):

@@ -406,8 +406,8 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
         block: rows per block (default :data:`BLOCK`).
 
     Returns:
-        The outputs of the dense fit of ``polyjax._fit.closed_form``: ``((mean, rotation, centre, halfwidth), coef (D, r, m),
-        l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
+        The outputs of the dense fit of ``polyjax._fit.closed_form``: ``((mean, rotation, centre, halfwidth),
+        coef (D, r, m), l2 (D, r), rank (D,), condition (D,), n_active (D,), n_used)``.
     """
     block = BLOCK if block is None else int(block)
     t, wc2 = geo["t"], geo["wc2"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, lobe, safe_pow, uniform_sampler
+from .common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, lobe, safe_pow, uniform_sampler
 
 
 def lafortune_anisotropic(params, u, v):

@@ -45,9 +45,9 @@ import numpy as np
 
 from polyjax import half_vector
 
-from . import _mx_microfacet as mx
-from ._common import UNIT, BaselineModel, LogBounded, grid, lobe, uniform_sampler
-from ._materials import material_writer
+from . import mx_microfacet as mx
+from .common import UNIT, BaselineModel, LogBounded, grid, lobe, uniform_sampler
+from .materials import material_writer
 
 #: The inputs this model evaluates and their defaults in ``ND_open_pbr_surface_surfaceshader``.
 DEFAULTS = {

@@ -1,42 +1,56 @@
-"""The staged multi-start kernel of the jaxopt backend: every start for ``stage_steps`` steps, the ``refine`` best of
-each lane to convergence, the best converged start kept, and a kept start that ran out of steps next to its
-parameters' range limits put on them and finished (see :func:`baselines.fit`). Each stage is a separate solve (a
-separate traced loop); the optimistix backend runs the same schedule through one loop (:mod:`baselines._multistart`).
-Also the shared pieces of both: the lanes' weights and starts (:func:`prepare_lanes`), the pick of the best start
-and the packaging of the kept one (:func:`finish`)."""
+"""The jaxopt backend of the multi-start fit (``backend="jaxopt"``), alone: jaxopt's Levenberg-Marquardt on every
+start of every lane (:func:`run_starts`), in the staged kernel: every start for ``stage_steps`` steps, the
+``refine`` best of each lane to convergence, the best converged start kept, and a kept start that ran out of steps
+next to its parameters' range limits put on them and finished (see :func:`baselines.fit`). Each stage is a separate
+solve (a separate traced loop); the optimistix backend runs the same schedule through one loop
+(:mod:`baselines._multistart`, which also holds the pieces both share)."""
 
 from __future__ import annotations
 
 import functools
+import warnings
 
 import jax
 import jax.numpy as jnp
 
 from polyjax import Result
 
-from ._registry import get_model
-from ._solvers import run_starts
-from ._starts import starts as make_starts
+from ._models.registry import get_model
+from ._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, optimistix_solve, prepare_lanes, residual_fn
+
+with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained: it is the alternative backend named
+    warnings.filterwarnings("ignore", message="JAXopt is no longer maintained", category=DeprecationWarning)
+    import jaxopt
 
 
-def _at(a, idx):
-    """``a[b, idx[b]]`` for every lane ``b``: ``a`` is ``(B, S, ...)``, ``idx`` is ``(B,)``."""
-    return jnp.take_along_axis(a, idx.reshape(idx.shape + (1,) * (a.ndim - 1)), axis=1)[:, 0]
+def _jaxopt_solve(fn, raw0, args, max_steps, rtol, atol):
+    solver = jaxopt.LevenbergMarquardt(
+        residual_fun=lambda r, a: fn(r, a), maxiter=max_steps, stop_criterion="madsen-nielsen", xtol=rtol,
+        gtol=atol, tol=atol, solver="cholesky", materialize_jac=True, implicit_diff=False, jit=True,
+    )
+    value, state = solver.run(raw0, args)
+    steps = state.iter_num.astype(jnp.int32)
+    code = jnp.where(steps < max_steps, Result.OK, Result.MAX_STEPS).astype(jnp.int32)
+    return value, code, steps
 
 
-def _pick(score_l2, code):
-    """Index of the best start per lane: converged and finite first, then any finite one."""
-    conv = jnp.where(code == Result.OK, score_l2, jnp.inf)
-    any_conv = jnp.any(jnp.isfinite(conv), axis=-1)
-    return jnp.where(any_conv, jnp.argmin(conv, axis=-1), jnp.argmin(score_l2, axis=-1))
+def run_starts(model, backend, u, v, y, sw, scale, raw0, max_steps, rtol, atol):
+    """Solve every start of every lane by ``backend``'s Levenberg-Marquardt (jaxopt's; optimistix's, one solve per
+    stage, as a comparison): raw0 (B, S, P) -> raw, code, steps, loss (B, S ...)."""
+    fn = residual_fn(model, u, v)
+    solve = {"optimistix": optimistix_solve, "jaxopt": _jaxopt_solve}[backend]
 
+    def one(r0, yb, swb):
+        raw, code, steps = solve(fn, r0, (yb, swb), max_steps, rtol, atol)
+        res = fn(raw, (yb, swb))
+        loss = jnp.sum(res * res)
+        finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
+        code = jnp.where(finite, code, Result.NONFINITE)
+        return raw, code, steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
-# a kept start that ran out of steps with parameters close to their range limits (in the unit
-# coordinate sin^2: one candidate per tolerance) is put on them and gets `limit_steps` more steps, up to
-# _LIMIT_ROUNDS times; _LIMIT_TOL flags the parameters reported as on a limit
-_LIMIT_TOLS = (1e-2, 1e-1)
-_LIMIT_TOL = _LIMIT_TOLS[0]
-_LIMIT_ROUNDS = 2
+    raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, None, None)))(raw0, y, sw)
+    return raw, code, steps, l2 * scale
+
 
 
 @functools.partial(
@@ -114,36 +128,3 @@ def staged_kernel(
     raw_b, code_b, l2_b, steps_b = state
     return finish(model, wc2, raw0, dict(
         code=code, sl2=sl2, best=best, raw_b=raw_b, code_b=code_b, l2_b=l2_b, steps_b=steps_b))
-
-
-def prepare_lanes(model, u, v, y, wl, wc2, key, raw0, n_starts):
-    """What both kernels solve with: ``(sw, scale, raw0)``, the residuals' square-root weights ``sw (B, n)``
-    (``sqrt(w cos^2 / sum w)`` of equation (11)) divided by the data's own L2 ``scale (B, 1)`` (the L2 of
-    ``f = 0``; 1 where that is 0), so that the solver's tolerances are relative, and the starts ``raw0 (B, S, P)``
-    (``n_starts`` made by :func:`baselines._starts.starts` when ``raw0`` is None)."""
-    den = jnp.sum(wl, axis=-1, keepdims=True)
-    sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
-    scale = jnp.sqrt(jnp.sum(sw * sw * y * y, axis=-1, keepdims=True))
-    scale = jnp.where(scale > 0, scale, 1.0)
-    if raw0 is None:
-        raw0 = make_starts(model, u, v, y, wc2, key, n_starts)
-    return sw / scale, scale, raw0
-
-
-def finish(model, wc2, raw0, c):
-    """The kept start's result (its L2 and code written back into the per-start arrays): a dict of ``(B, ...)``
-    arrays, the fields of :class:`baselines.BaselineFit` but ``params``, ``l2`` and ``success`` (which
-    :func:`baselines.fit` computes from ``raw``, differentiably)."""
-    best, raw_b, code_b, l2_b, steps_b = (c[k] for k in ("best", "raw_b", "code_b", "l2_b", "steps_b"))
-    rows = jnp.arange(raw_b.shape[0])
-    sl2 = c["sl2"].at[rows, best].set(l2_b)
-    code = c["code"].at[rows, best].set(code_b)
-    ok = jnp.all(jnp.isfinite(raw_b), axis=-1)
-    raw_b = jnp.where(ok[:, None], raw_b, raw0[:, 0])  # never hand back NaN parameters
-    code_b = jnp.where(ok, code_b, Result.NONFINITE)
-    no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
-    code_b = jnp.where(no_samples, Result.NO_SAMPLES, code_b).astype(jnp.int32)
-    return dict(
-        raw=raw_b, status=code_b, steps=steps_b, start_l2=sl2, start_status=code.astype(jnp.int32),
-        best_start=best.astype(jnp.int32), at_limit=model.snap_to_limits(raw_b, _LIMIT_TOL)[1],
-    )

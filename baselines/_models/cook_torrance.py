@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import (
+from .common import (
     POSITIVE,
     UNIT,
     BaselineModel,

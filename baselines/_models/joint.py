@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._common import BaselineModel
+from .common import BaselineModel
 
 #: suffix of a joint record's registry name
 SUFFIX = ":rgb"

@@ -30,8 +30,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._common import UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
-from ._materials import material_writer
+from .common import UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
+from .materials import material_writer
 
 #: The inputs this model evaluates and their defaults in the specification.
 DEFAULTS = {"diffuseColor": 0.18, "useSpecularWorkflow": 0, "specularColor": 0.0, "metallic": 0.0,

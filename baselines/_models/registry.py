@@ -6,26 +6,24 @@ import numpy as np
 
 from polyjax import UnknownNameError
 
-from . import (
-    _abc,
-    _ashikhmin_shirley,
-    _blinn_phong,
-    _cook_torrance,
-    _gltf_pbr,
-    _lafortune,
-    _lafortune_anisotropic,
-    _openpbr,
-    _oren_nayar,
-    _principled,
-    _sgd,
-    _usd_preview,
-    _ward,
-    _ward_anisotropic,
-    _ward_duer,
-)
-from ._common import REAL, BaselineModel
-from ._joint import SUFFIX, joint_model
-from ._zernike import n_zernike_terms, zernike
+from . import abc as _abc
+from . import ashikhmin_shirley as _ashikhmin_shirley
+from . import blinn_phong as _blinn_phong
+from . import cook_torrance as _cook_torrance
+from . import gltf_pbr as _gltf_pbr
+from . import lafortune as _lafortune
+from . import lafortune_anisotropic as _lafortune_anisotropic
+from . import openpbr as _openpbr
+from . import oren_nayar as _oren_nayar
+from . import principled as _principled
+from . import sgd as _sgd
+from . import usd_preview as _usd_preview
+from . import ward as _ward
+from . import ward_anisotropic as _ward_anisotropic
+from . import ward_duer as _ward_duer
+from .common import REAL, BaselineModel
+from .joint import SUFFIX, joint_model
+from .zernike import n_zernike_terms, zernike
 
 ZERNIKE = BaselineModel(
     name="zernike",

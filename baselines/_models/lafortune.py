@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, grid, lobe, safe_pow, uniform_sampler
+from .common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, grid, lobe, safe_pow, uniform_sampler
 
 
 def lafortune(params, u, v):

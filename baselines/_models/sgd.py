@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
-from ._common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, lobe, uniform_sampler
+from .common import POSITIVE, REAL, BaselineModel, Geometry, LogBounded, lobe, uniform_sampler
 
 
 def _theta(w):
@@ -79,8 +80,6 @@ def _columns(nl, u, v):
 
 
 def _guesses():
-    import numpy as np
-
     rows = []
     for alpha in (0.003, 0.03, 0.3):
         for f0 in (0.05, 0.5):

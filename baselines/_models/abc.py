@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
+from .common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
 
 
 def fresnel_dielectric(ior, c):

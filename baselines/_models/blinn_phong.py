@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, safe_pow, uniform_sampler
+from .common import POSITIVE, BaselineModel, Geometry, LogBounded, grid, lobe, safe_pow, uniform_sampler
 
 
 def blinn_phong(params, u, v):

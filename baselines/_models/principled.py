@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._common import UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
+from .common import UNIT, BaselineModel, Geometry, LogBounded, grid, lobe, uniform_sampler
 
 #: roughness range: Mitsuba clamps alpha = roughness^2 to at least 0.001, reached at roughness 0.0316
 ROUGHNESS = LogBounded(0.032, 1.0)

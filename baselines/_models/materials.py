@@ -1,5 +1,7 @@
-"""The material dictionaries of the standard models (``BaselineModel.to_material``): a fit's R, G, B parameters
-named as the model's specification names them, for the exporters of :mod:`polyjax.export`."""
+"""The material dictionaries of the standard models: a fit's R, G, B parameters named as the model's specification
+names them (``BaselineModel.to_material``, made by :func:`material_writer`), for the exporters of
+:mod:`polyjax.export`; :func:`channel_parameters` is the one check of a material's ``(3, P)`` parameters (also of
+:func:`baselines.standard_material`)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,14 @@ from typing import Callable
 import numpy as np
 
 from polyjax import InputError
+
+
+def channel_parameters(params: np.ndarray, n: int, expected: str, note: str = "") -> np.ndarray:
+    """``params`` when it is ``(3, n)``: one row of ``n`` parameters per colour channel (R, G, B); else an
+    :class:`polyjax.InputError` saying ``expected``, the shape found and ``note``."""
+    if params.shape != (3, n):
+        raise InputError(f"{expected}, found shape {params.shape}{note}")
+    return params
 
 
 def material_writer(name: str, fitted: tuple[str, ...], fixed: dict, defaults: dict, written: tuple[str, ...],
@@ -20,10 +30,8 @@ def material_writer(name: str, fitted: tuple[str, ...], fixed: dict, defaults: d
     """
 
     def to_material(params) -> dict:
-        params = np.asarray(params, float)
-        if params.shape != (3, len(fitted)):
-            raise InputError(f"to_material: expected the (3, {len(fitted)}) R, G, B parameters {list(fitted)} of "
-                             f"{name}, found shape {params.shape}")
+        params = channel_parameters(np.asarray(params, float), len(fitted), f"to_material: expected the "
+                                    f"(3, {len(fitted)}) R, G, B parameters {list(fitted)} of {name}")
         if not np.all(np.isfinite(params)):
             raise InputError(f"to_material: expected finite parameters of {name}, found {params.tolist()}")
         out = {"model": name, **{k: defaults[k] for k in written}, **fixed}

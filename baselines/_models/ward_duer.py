@@ -7,9 +7,9 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from ._common import Geometry, diffuse_specular_columns
-from ._ward import MODEL as WARD
-from ._ward import ward_lobe
+from .common import Geometry, diffuse_specular_columns
+from .ward import MODEL as WARD
+from .ward import ward_lobe
 
 
 def _specular(alpha, g):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import POSITIVE, BaselineModel, Bounded, Geometry, grid, uniform_sampler
+from .common import POSITIVE, BaselineModel, Bounded, Geometry, grid, uniform_sampler
 
 
 def _shape(sigma, g):

@@ -4,16 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ._common import (
-    POSITIVE,
-    BaselineModel,
-    Geometry,
-    LogBounded,
-    diffuse_specular_columns,
-    grid,
-    lobe,
-    uniform_sampler,
-)
+from .common import POSITIVE, BaselineModel, Geometry, LogBounded, diffuse_specular_columns, grid, lobe, uniform_sampler
 
 
 def _specular(ax, ay, g):

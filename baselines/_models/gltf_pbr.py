@@ -18,7 +18,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ._common import UNIT, BaselineModel, Geometry, LogBounded, Transform, grid, lobe, uniform_sampler
+from .common import UNIT, BaselineModel, Geometry, LogBounded, Transform, grid, lobe, uniform_sampler
 
 #: roughness range: alpha = roughness^2 >= 1e-4 (the specification's note: never alpha = 0)
 ROUGHNESS = LogBounded(1e-2, 1.0)
