@@ -52,7 +52,7 @@ import jax.numpy as jnp
 from .._basis import exponents
 from .._design import range_scaling
 from .._pca import pca_from_covariance
-from .._solve.linalg import svd
+from .._solve.linalg import cholesky_upper, svd
 from .._solve.lstsq import _solve_svd
 
 #: shared-design fits with at least this many samples (and 8 times more than columns plus right-hand sides)
@@ -126,8 +126,9 @@ def _stream_map(fn, n: int, block: int, arrays):
     return carry
 
 
-def _chol_upper(g):
-    r = jnp.linalg.cholesky(g).T
+def _checked_cholesky(g):
+    """:func:`polyjax._solve.linalg.cholesky_upper` of ``g`` and whether it succeeded (finite, positive diagonal)."""
+    r = cholesky_upper(g)
     return r, jnp.all(jnp.isfinite(r)) & jnp.all(jnp.diagonal(r) > 0)
 
 
@@ -261,7 +262,7 @@ def _equilibrated_cholesky(g, act):
     raw = jnp.sqrt(jnp.where(act, jnp.diagonal(g), 0.0))
     scale = jnp.where(raw > 0, raw, 1.0)
     pad = jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype))
-    r1, ok = _chol_upper(jnp.where(act[:, None] & act[None, :], g / (scale[:, None] * scale[None, :]), 0.0) + pad)
+    r1, ok = _checked_cholesky(jnp.where(act[:, None] & act[None, :], g / (scale[:, None] * scale[None, :]), 0.0) + pad)
     return scale, jnp.where(ok, r1, jnp.eye(m, dtype=dtype)), ok
 
 
@@ -332,7 +333,7 @@ def stream_geometry(x, wl, wc2l, active, *, max_degree, basis, interactions, blo
     c, colsq = _orthogonal_pass(t, sw, scale1, r1inv, rows, block)
 
     def second(act, c):
-        r2, ok = _chol_upper(c + jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype)))
+        r2, ok = _checked_cholesky(c + jnp.diag(jnp.where(act, 0.0, 1.0).astype(dtype)))
         return jnp.where(ok, r2, eye), ok
 
     r2, ok2 = jax.vmap(second)(active, c)
@@ -381,7 +382,7 @@ def _condition_upper(r):
     return s[:, 0] / s[:, -1]
 
 
-def _solve(geo, act_all, atb, n, rcond):
+def _solve_from_geometry(geo, act_all, atb, n, rcond):
     """``beta`` (D, r, m) minimising ``|b - A beta|`` given ``A^T b`` (D, m, r), per degree, from the geometry's
     ``E``, ``R_1^{-1}``, ``R_2`` and SVD of ``R`` (step 3 of the module docstring); also rank, condition and the
     number of active columns."""
@@ -422,7 +423,8 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
             return jnp.einsum("mb,rb->mr", design(t_b), wy, precision=_HI), jnp.sum(wy * y_b, axis=-1)
 
         atb, bb = _stream_sum(rhs, n, block, (t, y, wc2), (1, 1, 0))
-        coef0, rank, cond, n_act = _solve(geo, active, jnp.broadcast_to(atb, (n_deg,) + atb.shape), n, rcond)
+        coef0, rank, cond, n_act = _solve_from_geometry(geo, active, jnp.broadcast_to(atb, (n_deg,) + atb.shape), n,
+                                                        rcond)
         num0 = _residual_norm(bb, coef0, atb, g)  # (D, r)
         one_pass = jnp.all(cond <= SNE_CONDITION) & jnp.all(num0 >= CANCELLATION * bb)
 
@@ -434,7 +436,7 @@ def streamed_lane(geo, y, active, *, max_degree, basis, interactions, rcond, den
                 return jnp.sum(we * e, axis=-1), jnp.einsum("mb,drb->dmr", d, we, precision=_HI)
 
             r0, atr = _stream_sum(residuals, n, block, (t, y, wc2), (1, 1, 0))
-            delta = _solve(geo, active, atr, n, rcond)[0]  # (D, r, m)
+            delta = _solve_from_geometry(geo, active, atr, n, rcond)[0]  # (D, r, m)
             num = r0 - 2.0 * jnp.einsum("drm,dmr->dr", delta, atr) + jnp.einsum("drm,mk,drk->dr", delta, g, delta)
             return coef0 + delta, num
 

@@ -94,7 +94,7 @@ def _eigh_jvp(primals, tangents):
     return (w, v), (jnp.diagonal(vdv), v @ (f * vdv))
 
 
-def _chol_upper(g):
+def cholesky_upper(g):
     """Upper Cholesky factor of the symmetric positive definite ``g`` (NaN where it fails)."""
     return jnp.linalg.cholesky(g).T
 
@@ -120,13 +120,13 @@ def tall_qr(a, b, active):
     n, m = a.shape
     hi = jax.lax.Precision.HIGHEST
     pad = jnp.diag(jnp.where(active, 0.0, 1.0).astype(a.dtype))
-    r1 = _chol_upper(jnp.matmul(a.T, a, precision=hi) + pad)
+    r1 = cholesky_upper(jnp.matmul(a.T, a, precision=hi) + pad)
     ok1 = jnp.all(jnp.isfinite(r1)) & jnp.all(jnp.diagonal(r1) > 0)
     r1 = jnp.where(ok1, r1, jnp.eye(m, dtype=a.dtype))
     # Q1 = A R1^{-1} through the explicit m x m inverse: one matrix product over the n rows (a triangular
     # solve with n right-hand sides ran 3x slower on the CPU); the second pass absorbs its rounding.
     q1 = jnp.matmul(a, jax.scipy.linalg.solve_triangular(r1, jnp.eye(m, dtype=a.dtype), lower=False), precision=hi)
-    r2 = _chol_upper(jnp.matmul(q1.T, q1, precision=hi) + pad)
+    r2 = cholesky_upper(jnp.matmul(q1.T, q1, precision=hi) + pad)
     ok = ok1 & jnp.all(jnp.isfinite(r2)) & jnp.all(jnp.diagonal(r2) > 0)
     r2 = jnp.where(ok, r2, jnp.eye(m, dtype=a.dtype))
     both = active[:, None] & active[None, :]

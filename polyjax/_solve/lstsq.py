@@ -191,15 +191,15 @@ def _solve_svd(uu, s, vt, utb, scale, act, n, rcond):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(4, 5))
-def _solve(design, y2, weights, act, method, rcond):
+def _solve_weighted(design, y2, weights, act, method, rcond):
     return _factor(design, y2, weights, act, method, rcond)[0]
 
 
 @functools.partial(jax.jit, static_argnums=(4, 5))
 def _solve_compiled(design, y2, weights, act, method, rcond):
-    """:func:`_solve` as one compiled program (and so its derivatives, under ``grad`` or ``jvp`` outside ``jit``:
-    op by op, each of their operations would be compiled on its own)."""
-    return _solve(design, y2, weights, act, method, rcond)
+    """:func:`_solve_weighted` as one compiled program (and so its derivatives, under ``grad`` or ``jvp`` outside
+    ``jit``: op by op, each of their operations would be compiled on its own)."""
+    return _solve_weighted(design, y2, weights, act, method, rcond)
 
 
 def _solve_jvp(method, rcond, primals, tangents):
@@ -257,7 +257,7 @@ def _solve_jvp(method, rcond, primals, tangents):
     return out, (dcoef, int_zero, dcond, ds, int_zero)
 
 
-_solve.defjvp(_solve_jvp, symbolic_zeros=True)
+_solve_weighted.defjvp(_solve_jvp, symbolic_zeros=True)
 
 
 weighted_lstsq_jit = jax.jit(weighted_lstsq, static_argnames=("method", "rcond"))

@@ -62,7 +62,7 @@ def fit_polynomial_to_images(
     robust_steps: int = 0,
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
-    because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve`` (or
+    because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve_images`` (or
     :func:`polyjax.inverse._samples.fit_samples` for the BRDF-sample fits).
 
     Minimises, per colour channel, ``sum_pixels w_px (I_px - L_px(beta))^2`` over the kept pixels of
@@ -125,7 +125,7 @@ def fit_polynomial_to_images(
         InputError: scenes/images disagree in number or size, an image is not ``(H, W, 3)``, bad options,
             or a scene with inter-reflections.
     """
-    vs = _check_options(variables, degree, basis, method)
+    vs = _check_image_fit_options(variables, degree, basis, method)
     if int(robust_steps) != robust_steps or int(robust_steps) < 0:
         raise InputError(f"robust_steps: expected a non-negative integer, found {robust_steps!r}")
     if link not in ("identity", "log"):
@@ -146,11 +146,11 @@ def fit_polynomial_to_images(
     if _concrete(c):
         cn = np.asarray(c)
         shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
-    return _solve(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
+    return _solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
                   interactions=bool(interactions), method=method, rcond=rcond, shared=shared)
 
 
-def _check_options(variables, degree, basis, method):
+def _check_image_fit_options(variables, degree, basis, method):
     """The variable set of ``variables``; raises :class:`InputError` for a bad degree, basis or method."""
     vs = get_variables(variables)
     if basis not in BASES:
@@ -165,7 +165,8 @@ def _check_options(variables, degree, basis, method):
 @functools.partial(
     jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond", "shared")
 )
-def _solve(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond, shared) -> PolynomialBRDF:
+def _solve_images(u, v, c, y, wpx, keep, variables, degree, basis, interactions, method, rcond,
+                  shared) -> PolynomialBRDF:
     """The design of equation (3) summed over light samples, and one weighted solve per channel (one solve
     with three right-hand sides when ``shared``: every light weight is the same in R, G and B)."""
     n, n_j, _ = u.shape
