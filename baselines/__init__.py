@@ -9,6 +9,10 @@ compact models whose fits of the 100 MERL materials are published (:func:`publis
 point (``jax.config.update("jax_enable_x64", True)``).
 """
 
+import warnings
+
+from polyjax import RESULTS
+
 from ._fit import fit
 from ._fit_images import fit_to_images
 from ._models.abc import abc
@@ -29,12 +33,20 @@ from ._models.ward_duer import ward_duer
 from ._models.zernike import disk_point, n_zernike_terms, zernike, zernike_design, zernike_terms
 from ._multistart import BACKENDS, residuals
 from ._published import published, published_materials
-from ._result import BaselineFit, BaselineStatus, standard_material
+from ._result import BaselineFit, standard_material
 from ._saving import KIND as SAVED_MODEL_KIND
 from ._starts import initial_guesses
 
+
+def __getattr__(name):
+    if name == "BaselineStatus":  # a former name of polyjax.RESULTS
+        warnings.warn("baselines.BaselineStatus is deprecated: use polyjax.RESULTS", DeprecationWarning, stacklevel=2)
+        return RESULTS
+    raise AttributeError(f"module 'baselines' has no attribute {name!r}")
+
+
 __all__ = [
-    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS",
+    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "MODELS", "NONLINEAR_MODELS",
     "PAPER_MODELS", "Transform", "abc", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit",
     "fit_to_images", "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms",
     "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",

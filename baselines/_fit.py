@@ -34,7 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import polyjax as pj
-from polyjax import InputError, Result, one_lapack_thread, raise_on_status
+from polyjax import RESULTS, InputError
+from polyjax.internal import is_concrete, one_lapack_thread, prepare_inputs, raise_on_status
 
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
@@ -135,13 +136,13 @@ def fit(
 
     Returns:
         :class:`BaselineFit` with batch shape ``values.shape[:-1]``. A lane whose kept start did not
-        converge has ``success = False`` and its :class:`polyjax.Result` code; parameters are never NaN.
+        converge has ``success = False`` and its :class:`polyjax.RESULTS` code; parameters are never NaN.
     """
     model = get_model(name)
     if backend not in BACKENDS:
         raise InputError(f"backend: expected one of {BACKENDS}, found {backend!r}")
     check_n_starts(n_starts)
-    inp, cutoff = pj.prepare_inputs("fit", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
+    inp, cutoff = prepare_inputs("fit", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
     wl, wc2 = inp.objective_weights(cutoff)
     if model.linear:
         out = fit_zernike(inp.u, inp.v, inp.values, wl, wc2, order)
@@ -170,7 +171,7 @@ def _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> 
             jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
     out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
     out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
-    out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
+    out["success"] = (out["status"] == RESULTS.OK) & jnp.isfinite(out["l2"])
     return out
 
 
@@ -187,9 +188,9 @@ def _shaped(out: dict, lane_bad, *, batch: tuple) -> dict:
 
     One result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     NONFINITE, as in the polynomial fit; a NONFINITE lane's L2 is inf."""
-    status = jnp.where(lane_bad, Result.NONFINITE, out["status"])
-    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status).astype(jnp.int32)
-    out = dict(out, status=status, success=out["success"] & (status == Result.OK),
+    status = jnp.where(lane_bad, RESULTS.NONFINITE, out["status"])
+    status = jnp.where((status == RESULTS.OK) & ~jnp.isfinite(out["l2"]), RESULTS.NONFINITE, status).astype(jnp.int32)
+    out = dict(out, status=status, success=out["success"] & (status == RESULTS.OK),
                l2=jnp.where(lane_bad, jnp.inf, out["l2"]))
     return {k: a.reshape(batch + a.shape[1:]) for k, a in out.items()}
 
@@ -217,6 +218,6 @@ def _check_starts(model, starts, dtype, batch, max_steps, limit_steps):
         raise InputError(f"starts: expected shape (..., S, {model.n_params}), found {raw0.shape}")
     nb = int(np.prod(batch)) if batch else 1
     raw0 = jnp.broadcast_to(raw0, batch + raw0.shape[-2:]).reshape((nb,) + raw0.shape[-2:])
-    if pj.is_concrete(raw0) and not bool(jnp.all(jnp.isfinite(raw0))):
+    if is_concrete(raw0) and not bool(jnp.all(jnp.isfinite(raw0))):
         raise InputError("starts: expected finite unconstrained parameters")
     return raw0

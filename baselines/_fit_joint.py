@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 
 import polyjax as pj
-from polyjax import InputError, Result
+from polyjax import RESULTS, InputError
 
 from ._implicit import implicit_optimum
 from ._jaxopt import staged_kernel
@@ -57,5 +57,5 @@ def _package(name, out, u, v, y, wl, wc2):
     fields = {k: rep(out[k]) for k in ("status", "steps", "start_l2", "start_status", "best_start")}
     rows = jnp.arange(3 * m)
     at_limit = rep(out["at_limit"])[rows[:, None], jnp.asarray(channel_index(model))[rows % 3]]
-    success = (fields["status"] == Result.OK) & jnp.isfinite(l2)
+    success = (fields["status"] == RESULTS.OK) & jnp.isfinite(l2)
     return dict(fields, raw=raw, params=params, l2=l2, at_limit=at_limit, success=success)

@@ -13,7 +13,7 @@ import warnings
 import jax
 import jax.numpy as jnp
 
-from polyjax import Result
+from polyjax import RESULTS
 
 from ._models.registry import get_model
 from ._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, optimistix_solve, prepare_lanes, residual_fn
@@ -30,7 +30,7 @@ def _jaxopt_solve(fn, raw0, args, max_steps, rtol, atol):
     )
     value, state = solver.run(raw0, args)
     steps = state.iter_num.astype(jnp.int32)
-    code = jnp.where(steps < max_steps, Result.OK, Result.MAX_STEPS).astype(jnp.int32)
+    code = jnp.where(steps < max_steps, RESULTS.OK, RESULTS.MAX_STEPS).astype(jnp.int32)
     return value, code, steps
 
 
@@ -45,7 +45,7 @@ def run_starts(model, backend, u, v, y, sw, scale, raw0, max_steps, rtol, atol):
         res = fn(raw, (yb, swb))
         loss = jnp.sum(res * res)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
-        code = jnp.where(finite, code, Result.NONFINITE)
+        code = jnp.where(finite, code, RESULTS.NONFINITE)
         return raw, code, steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
     raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, None, None)))(raw0, y, sw)
@@ -82,7 +82,7 @@ def staged_kernel(
             model, backend, u, v, y, sw, scale, take(raw1, order[..., None]), max(max_steps - stage_steps, 1), rtol,
             atol,
         )
-        done = code1 == Result.OK
+        done = code1 == RESULTS.OK
         raw, code, steps, sl2 = raw1, code1, steps1, sl21
         # starts not continued: keep stage-1 state (those not converged are MAX_STEPS)
         d = take(done, order)
@@ -105,7 +105,7 @@ def staged_kernel(
     def limit_round(state):
         raw_b, code_b, l2_b, steps_b = state
         snapped = [model.snap_to_limits(raw_b, tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
-        retry = (code_b == Result.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
+        retry = (code_b == RESULTS.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
         cand = jnp.stack([jnp.where(retry[:, None], r, raw_b) for r, _ in snapped], axis=1)  # (B, C, P)
         raw_p, code_p, steps_p, l2_p = run_starts(model, backend, u, v, y, sw, scale, cand, limit_steps, rtol, atol)
         better = jnp.isfinite(l2_p) & (l2_p <= (l2_b * (1.0 + rtol) + atol * scale[:, 0])[:, None])
@@ -120,7 +120,7 @@ def staged_kernel(
     def needs_round(state):
         raw_b, code_b = state[0], state[1]
         near = model.snap_to_limits(raw_b, _LIMIT_TOLS[-1])[1]
-        return jnp.any((code_b == Result.MAX_STEPS) & jnp.any(near, axis=-1))
+        return jnp.any((code_b == RESULTS.MAX_STEPS) & jnp.any(near, axis=-1))
 
     state = (raw_b, code_b, l2_b, steps_b)
     for _ in range(_LIMIT_ROUNDS if limit_steps > 0 else 0):  # skipped at run time when no lane needs it

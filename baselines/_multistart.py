@@ -27,7 +27,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from polyjax import Result
+from polyjax import RESULTS
 
 from ._lm import lm_solve
 from ._models.registry import get_model
@@ -45,7 +45,7 @@ def _solve_block(model, u, v, y, sw, scale, raw0, budget, rtol, atol):
         res = fn(raw, (yb, swb))
         loss = jnp.sum(res * res)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
-        return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
+        return raw, jnp.where(finite, code, RESULTS.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
     raw, code, steps, l2 = jax.vmap(jax.vmap(one, in_axes=(0, 0, None, None)))(raw0, budget, y, sw)
     return raw, code, steps, l2 * scale
@@ -117,7 +117,7 @@ def _initial_carry(raw0, plan: _Plan) -> dict:
     nb, ns, npar = raw0.shape
     i32, f, ncand = jnp.int32, raw0.dtype, plan.n_cand
     return dict(
-        raw=raw0, code=jnp.full((nb, ns), Result.MAX_STEPS, i32), steps=jnp.zeros((nb, ns), i32),
+        raw=raw0, code=jnp.full((nb, ns), RESULTS.MAX_STEPS, i32), steps=jnp.zeros((nb, ns), i32),
         sl2=jnp.full((nb, ns), jnp.inf, f), order=jnp.zeros((nb, plan.r), i32),
         best=jnp.zeros((nb,), i32), raw_b=raw0[:, 0], code_b=jnp.zeros((nb,), i32), l2_b=jnp.zeros((nb,), f),
         steps_b=jnp.zeros((nb,), i32), retry=jnp.zeros((nb,), bool), cand=jnp.zeros((nb, ncand, npar), f),
@@ -149,7 +149,7 @@ def _prep_a(plan: _Plan, j, c):
 
 def _prep_b(plan: _Plan, j, c):
     order = jnp.argsort(c["sl2"], axis=1)[:, :plan.r].astype(jnp.int32)
-    done = jnp.take_along_axis(c["code"], order, axis=1) == Result.OK
+    done = jnp.take_along_axis(c["code"], order, axis=1) == RESULTS.OK
     block = jnp.take_along_axis(c["raw"], order[..., None], axis=1)
     return dict(c, order=order), block, jnp.where(done, 0, max(plan.max_steps - plan.stage_steps, 1)).astype(jnp.int32)
 
@@ -157,7 +157,7 @@ def _prep_b(plan: _Plan, j, c):
 def _prep_c(plan: _Plan, model, j, c):
     sub = _round_job(plan, j)
     snapped = [model.snap_to_limits(c["raw_b"], tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
-    retry = (c["code_b"] == Result.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
+    retry = (c["code_b"] == RESULTS.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
     cand = jnp.stack([jnp.where(retry[:, None], s, c["raw_b"]) for s, _ in snapped], axis=1)
     cand = jnp.concatenate([cand, jnp.repeat(cand[:, -1:], plan.n_cand - cand.shape[1], axis=1)], axis=1)
     first = sub == 0  # a round's candidates are made by its first job
@@ -178,7 +178,7 @@ def _store_b(j, c, res):
     order = c["order"]
     rows = jnp.arange(order.shape[0])[:, None]
     take = lambda a: jnp.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa
-    d = take(c["code"]) == Result.OK  # converged in stage 1: keep its stage-1 state
+    d = take(c["code"]) == RESULTS.OK  # converged in stage 1: keep its stage-1 state
     c = dict(
         c, raw=c["raw"].at[rows, order].set(jnp.where(d[..., None], take(c["raw"]), raw2)),
         code=c["code"].at[rows, order].set(jnp.where(d, take(c["code"]), code2)),
@@ -230,10 +230,10 @@ def optimistix_solve(fn, raw0, args, max_steps, rtol, atol):
     max_steps_hit = (sol.result == r.max_steps_reached) | (sol.result == r.nonlinear_max_steps_reached)
     code = jnp.where(
         sol.result == r.successful,
-        Result.OK,
+        RESULTS.OK,
         jnp.where(
-            max_steps_hit, Result.MAX_STEPS,
-            jnp.where(sol.result == r.nonfinite, Result.NONFINITE, Result.FAILED),
+            max_steps_hit, RESULTS.MAX_STEPS,
+            jnp.where(sol.result == r.nonfinite, RESULTS.NONFINITE, RESULTS.FAILED),
         ),
     )
     return sol.value, code.astype(jnp.int32), sol.stats["num_steps"].astype(jnp.int32)
@@ -252,7 +252,7 @@ def _at(a, idx):
 
 def _pick(score_l2, code):
     """Index of the best start per lane: converged and finite first, then any finite one."""
-    conv = jnp.where(code == Result.OK, score_l2, jnp.inf)
+    conv = jnp.where(code == RESULTS.OK, score_l2, jnp.inf)
     any_conv = jnp.any(jnp.isfinite(conv), axis=-1)
     return jnp.where(any_conv, jnp.argmin(conv, axis=-1), jnp.argmin(score_l2, axis=-1))
 
@@ -289,9 +289,9 @@ def finish(model, wc2, raw0, c):
     code = c["code"].at[rows, best].set(code_b)
     ok = jnp.all(jnp.isfinite(raw_b), axis=-1)
     raw_b = jnp.where(ok[:, None], raw_b, raw0[:, 0])  # never hand back NaN parameters
-    code_b = jnp.where(ok, code_b, Result.NONFINITE)
+    code_b = jnp.where(ok, code_b, RESULTS.NONFINITE)
     no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
-    code_b = jnp.where(no_samples, Result.NO_SAMPLES, code_b).astype(jnp.int32)
+    code_b = jnp.where(no_samples, RESULTS.NO_SAMPLES, code_b).astype(jnp.int32)
     return dict(
         raw=raw_b, status=code_b, steps=steps_b, start_l2=sl2, start_status=code.astype(jnp.int32),
         best_start=best.astype(jnp.int32), at_limit=model.snap_to_limits(raw_b, _LIMIT_TOL)[1],

@@ -11,24 +11,21 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from polyjax import InputError, Result, safe_normalize
+from polyjax import InputError, safe_normalize
 
 from ._models.common import BaselineModel
 from ._models.materials import channel_parameters
 from ._models.registry import get_model
 
-#: The result codes of a baseline fit: an alias of :class:`polyjax.Result`, shared with every fitter.
-BaselineStatus = Result
-
 
 class BaselineFit(eqx.Module):
-    """Result of :func:`baselines.fit` for a batch of lanes (materials, channels).
+    """The result of :func:`baselines.fit` for a batch of lanes (materials, channels).
 
     Attributes:
         params: ``(*batch, P)`` constrained (physical) parameters, see ``param_names``.
         raw: ``(*batch, P)`` the unconstrained parameters the optimiser worked on.
         l2: ``(*batch,)`` L2 of equation (11) (:func:`polyjax.l2_error`) of the kept start.
-        status: ``(*batch,)`` :class:`polyjax.Result` code of the kept start.
+        status: ``(*batch,)`` :class:`polyjax.RESULTS` code of the kept start.
         steps: ``(*batch,)`` solver steps of the kept start (both stages).
         success: ``(*batch,)`` True when the kept start converged to a finite L2.
         start_l2: ``(*batch, S)`` final L2 of every start (``inf`` for non-finite ones).

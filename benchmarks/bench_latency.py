@@ -53,7 +53,7 @@ if mode == "scipy":
     from scipy.optimize import least_squares
     u, v = jax.numpy.asarray(data.u), jax.numpy.asarray(data.v)
     starts = np.load(sys.argv[4])  # the 16 starts baselines.fit uses, computed by the parent process
-    w, wc2 = pj.fit_weights(u, v, data.weights, None, 80.0)
+    w, wc2 = pj.internal.fit_weights(u, v, data.weights, None, 80.0)
     sw2 = wc2 / jax.numpy.sum(w)
     y = jax.numpy.asarray(data.values)
     fn = jax.jit(lambda r, yb: bl.residuals(name, r, u, v, yb, sw2))

@@ -43,7 +43,7 @@ import numpy as np
 
 from ._arrays import device_array
 from ._errors import DataFormatError, DataNotFoundError, InputError, UnknownNameError
-from ._model import FitStatus, PolynomialBRDF
+from ._model import RESULTS, PolynomialBRDF
 
 ENTRY_POINT_GROUP = "polyjax.models"
 
@@ -209,7 +209,7 @@ FORMAT_V1 = "polyjax.PolynomialBRDF"
 _STATIC_V1 = ("variables", "basis", "interactions", "max_degree")
 
 POLYNOMIAL_KIND = register_model_kind(module_kind(
-    PolynomialBRDF, "polyjax.PolynomialBRDF", status_names=tuple(s.name for s in FitStatus),
+    PolynomialBRDF, "polyjax.PolynomialBRDF", status_names=tuple(s.name for s in RESULTS),
 ))
 
 

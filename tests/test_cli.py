@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-from polyjax.cli._main import main
+from polyjax.cli import main
 
 
 @pytest.mark.data

@@ -7,7 +7,7 @@ import numpy as np
 
 import polyjax as pj
 import polyjax.render as pr
-from polyjax.cli._main import main
+from polyjax.cli import main
 
 SIZE = 32
 LIGHTS = [(3.0, 2.0, 4.0), (-3.0, 1.0, 3.0), (0.0, -3.0, 4.0)]

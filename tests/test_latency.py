@@ -162,7 +162,7 @@ def test_streamed_fit_equals_dense_fit(small_stream, monkeypatch, variables, deg
     np.testing.assert_allclose(streamed.condition, dense.condition, rtol=1e-8)
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(getattr(streamed, field), getattr(dense, field))
-    assert np.all(np.asarray(streamed.status) == pj.Result.OK)
+    assert np.all(np.asarray(streamed.status) == pj.RESULTS.OK)
 
 
 def test_streamed_fit_of_a_nearly_exact_polynomial_takes_the_refining_pass(small_stream):
@@ -188,7 +188,7 @@ def test_streamed_fit_falls_back_on_a_rank_deficient_design(small_stream):
     assert small_stream
     dense = jax.jit(lambda a, b, y: pj.fit_polynomial(a, b, y, "lafortune", 3))(u, u, values)
     np.testing.assert_array_equal(streamed.status, dense.status)
-    assert np.all(np.asarray(streamed.status) == pj.Result.RANK_DEFICIENT)
+    assert np.all(np.asarray(streamed.status) == pj.RESULTS.RANK_DEFICIENT)
     np.testing.assert_allclose(streamed.l2, dense.l2, rtol=1e-10)
 
 

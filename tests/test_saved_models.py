@@ -13,7 +13,7 @@ import pytest
 import baselines
 import polyjax as pj
 import polyjax.render as pr
-from polyjax.cli._main import main
+from polyjax.cli import main
 
 from _data_problems import write_small_merl
 
@@ -95,7 +95,7 @@ def test_model_kind_found_through_an_entry_point(tmp_path, monkeypatch):
     (tmp_path / "toykinds.py").write_text(textwrap.dedent('''
         import equinox as eqx
         import jax.numpy as jnp
-        from polyjax._io import module_kind
+        from polyjax.internal import module_kind
 
         class Toy(eqx.Module):
             scale: jnp.ndarray

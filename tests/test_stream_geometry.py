@@ -34,7 +34,7 @@ def _problem(seed=0, narrow_sample=False):
 
 def _geometry(u, v, weights, variables="lafortune", degree=4):
     x = pj.explanatory_variables(variables, u, v)
-    w, wc2 = pj.fit_weights(u, v, weights, None, 80.0)
+    w, wc2 = pj.internal.fit_weights(u, v, weights, None, 80.0)
     k = x.shape[1]
     active = jnp.asarray(term_degrees(k, degree, False))[None, :] <= jnp.asarray([degree])[:, None]
     geo = jax.jit(lambda x, w, wc2: stream_mod.stream_geometry(
@@ -190,7 +190,7 @@ def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
     w2[:100] = 0.0
     memo._GEOMETRY_MEMO.clear()
     other = pj.fit_polynomial(u2, v2, _values(u2, v2), "lafortune", 4, weights=w2)
-    assert np.all(np.asarray(other.status) == pj.Result.OK)
+    assert np.all(np.asarray(other.status) == pj.RESULTS.OK)
     foreign = memo._GEOMETRY_MEMO["last"]["geo"]
     store.save(folder, key, foreign)
     n_computed = len(computed)
@@ -218,8 +218,8 @@ def test_kept_fields_template_is_the_geometry_shape(variables, degrees):
     """The shapes and dtypes a kept geometry is checked against are those the geometry has."""
     import polyjax._cache.geometry as store
     import polyjax._fit.closed_form as fit_mod
-    from polyjax._basis import n_terms
-    from polyjax._inputs import prepare_inputs
+    from polyjax import n_terms
+    from polyjax.internal import prepare_inputs
 
     u, v, weights = _problem(8)
     inp, _ = prepare_inputs("fit_polynomial", u, v, _values(u, v), weights, None, cutoff_deg=80.0)
@@ -244,7 +244,7 @@ def test_kept_rows_block_by_block_are_the_whole_rows():
     transform = [geo[f] for f in ("mean", "rotation", "centre", "halfwidth")]
 
     def sample(u, v, w, m):
-        wl, wc2l = pj.fit_weights(u, v, w, m, 80.0)
+        wl, wc2l = pj.internal.fit_weights(u, v, w, m, 80.0)
         return pj.explanatory_variables("lafortune", u, v), wl, wc2l
 
     whole = jax.jit(lambda *a: stream_mod.stream_rows(*sample(*a), *transform))(u, v, weights, mask)

@@ -10,7 +10,7 @@ import pytest
 
 import baselines as bl
 import polyjax as pj
-from polyjax.cli._main import main
+from polyjax.cli import main
 
 from _problems import random_hemisphere
 
@@ -216,14 +216,14 @@ def test_negative_weights_refused_eagerly_and_flagged_under_jit_never_clipped(pr
     with pytest.raises(pj.InputError, match="weights: expected finite, non-negative"):
         pj.fit_polynomial(u, v, b, weights=w, degree=2)
     m = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.asarray(w))
-    assert int(m.status) == pj.Result.NONFINITE and np.isinf(float(m.l2))
+    assert int(m.status) == pj.RESULTS.NONFINITE and np.isinf(float(m.l2))
     ok = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.ones(205))
-    assert int(ok.status) == pj.Result.OK and np.isfinite(float(ok.l2))
+    assert int(ok.status) == pj.RESULTS.OK and np.isfinite(float(ok.l2))
 
 
 # ---------------------------------------------------------------- 12: every variable set in --help, a --link flag
 def test_fit_help_lists_every_variable_set_and_a_link_flag(monkeypatch):
-    from polyjax.cli._main import build_parser
+    from polyjax.cli import build_parser
 
     monkeypatch.setenv("COLUMNS", "2000")  # one line per option: names are not wrapped at their hyphens
     sub = build_parser("fit")._subparsers._group_actions[0].choices["fit"]

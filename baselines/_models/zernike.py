@@ -36,7 +36,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from polyjax import InputError, Result, check_parameter_count, l2_error, weighted_lstsq
+from polyjax import RESULTS, InputError, l2_error, weighted_lstsq
+from polyjax.internal import check_parameter_count
 
 
 @functools.lru_cache(maxsize=None)
@@ -143,12 +144,12 @@ def _zernike_kernel(u, v, y, wl, wc2, *, order):
     coef = sol.coefficients
     l2 = l2_error(y, coef @ d.T, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
     no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
-    code = jnp.where(sol.rank < sol.n_active, Result.RANK_DEFICIENT, Result.OK)  # as in the polynomial fit
-    code = jnp.where(no_samples, Result.NO_SAMPLES, code).astype(jnp.int32)
+    code = jnp.where(sol.rank < sol.n_active, RESULTS.RANK_DEFICIENT, RESULTS.OK)  # as in the polynomial fit
+    code = jnp.where(no_samples, RESULTS.NO_SAMPLES, code).astype(jnp.int32)
     coef = jnp.where(no_samples[:, None], 0.0, coef)
     zero = jnp.zeros(code.shape, jnp.int32)
     return dict(
-        params=coef, raw=coef, l2=l2, status=code, steps=zero, success=code == Result.OK, start_l2=l2[:, None],
+        params=coef, raw=coef, l2=l2, status=code, steps=zero, success=code == RESULTS.OK, start_l2=l2[:, None],
         start_status=code[:, None], best_start=zero, at_limit=jnp.zeros(coef.shape, bool),
     )
 

@@ -3,24 +3,23 @@
 from __future__ import annotations
 
 import functools
-from typing import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import ArrayLike
 
+from .._arrays import is_concrete
 from .._basis import BASES, n_terms, term_degrees
 from .._cache import geometry as store
 from .._cache import memo
 from .._cache.keys import geometry_key
 from .._design import fitted_design
 from .._errors import InputError
-from .._inputs import PreparedInputs, check_parameter_count, is_concrete, prepare_inputs
+from .._inputs import PreparedInputs, check_parameter_count, prepare_inputs
 from .._measurements import Measurements
 from .._metrics import fit_weights
 from .._model import PolynomialBRDF
-from .._results import Result, raise_on_status
+from .._results import RESULTS, raise_on_status
 from .._solve.lstsq import METHODS, weighted_lstsq
 from .._variables import get_variables
 from . import stream as streaming
@@ -154,14 +153,14 @@ def _fit_groups(inp, n_deg, lane, *, variables, cutoff_deg, lane_block):
 
 
 def _result_fields(inp, degrees, tr, coef, l2, rank, cond, n_act, n_used) -> dict:
-    """The fields of :class:`polyjax.PolynomialBRDF` as ``(D, B, ...)`` arrays, with the :class:`polyjax.Result`
+    """The fields of :class:`polyjax.PolynomialBRDF` as ``(D, B, ...)`` arrays, with the :class:`polyjax.RESULTS`
     code of every lane; a failed lane (no samples, non-finite values) has zero coefficients and L2 ``inf``."""
     n_deg, nb = l2.shape
     bad = jnp.broadcast_to(inp.lane_bad[None, :], (n_deg, nb))
-    status = jnp.where(jnp.isfinite(l2), Result.OK, Result.NONFINITE)  # an overflowing L2 is not OK
-    status = jnp.where(rank < n_act, Result.RANK_DEFICIENT, status)
-    status = jnp.where(n_used == 0, Result.NO_SAMPLES, status)
-    status = jnp.where(bad, Result.NONFINITE, status).astype(jnp.int32)
+    status = jnp.where(jnp.isfinite(l2), RESULTS.OK, RESULTS.NONFINITE)  # an overflowing L2 is not OK
+    status = jnp.where(rank < n_act, RESULTS.RANK_DEFICIENT, status)
+    status = jnp.where(n_used == 0, RESULTS.NO_SAMPLES, status)
+    status = jnp.where(bad, RESULTS.NONFINITE, status).astype(jnp.int32)
     failed = bad | (n_used == 0)
     coef = jnp.where(failed[..., None], 0.0, coef)
     l2 = jnp.where(failed, jnp.inf, l2)
@@ -271,25 +270,9 @@ def check_fit_options(basis, method, rank_deficient, degree, lane_block):
     return degrees
 
 
-def fit_closed_form(
-    u,
-    v: ArrayLike | None = None,
-    values: ArrayLike | None = None,
-    variables: str = "lafortune",
-    degree: int | Sequence[int] = 5,
-    *,
-    weights: ArrayLike | None = None,
-    mask: ArrayLike | None = None,
-    cutoff_deg: float | None = 80.0,
-    basis: str = "legendre",
-    interactions: bool = False,
-    method: str = "qr",
-    rcond: float | None = None,
-    rank_deficient: str = "flag",
-    nonfinite: str = "error",
-    throw: bool = False,
-    lane_block: int = LANE_BLOCK,
-) -> PolynomialBRDF:
+def fit_closed_form(u, v, values, variables: str, degree, *, weights, mask, cutoff_deg, basis: str, interactions: bool,
+                    method: str, rcond, rank_deficient: str, nonfinite: str = "error", throw: bool = False,
+                    lane_block: int = LANE_BLOCK) -> PolynomialBRDF:
     """The closed-form fit of equation (3) (:func:`polyjax.fit_polynomial` with ``link="identity"``, its arguments):
     the options checked, :func:`polyjax.internal.prepare_inputs`, the compiled kernel (dense, streamed or sharded:
     :func:`_run_kernel`), the result; the building block of every polynomial fit (the log-space fit's solves too)."""

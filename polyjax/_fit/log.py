@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
+from .._arrays import is_traced
 from .._errors import InputError
 from .._measurements import Measurements
 from .._metrics import fit_weights, l2_error
@@ -123,7 +124,7 @@ def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):
     values = jnp.asarray(values)
     if not jnp.issubdtype(values.dtype, jnp.floating):
         values = values.astype(jnp.result_type(float))
-    if not isinstance(values, jax.core.Tracer):
+    if not is_traced(values):
         finite = np.isfinite(np.asarray(values)) | (False if mask is None else ~np.asarray(mask, bool))
         if not finite.all():
             raise InputError(

@@ -98,7 +98,7 @@ def fit_polynomial(
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
-        degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.Result` codes.
+        degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.RESULTS` codes.
     """
     if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_fit/log.py
         if link != "log" or nonfinite != "error":

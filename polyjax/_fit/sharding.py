@@ -23,12 +23,13 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from .._arrays import is_traced
 from .._errors import InputError
 
 
 def _named_sharding(a):
     """The :class:`NamedSharding` of ``a`` (concrete or traced), or None."""
-    if isinstance(a, jax.core.Tracer):
+    if is_traced(a):
         try:
             sh = jax.typeof(a).sharding
         except Exception:  # noqa: BLE001 - a tracer without a sharding in its type
@@ -90,7 +91,7 @@ def lane_sharding(batch_ndim: int, named: dict):
 def _place(a, mesh, spec):
     """``a`` laid out as ``spec`` on ``mesh``: moves blocks between devices when needed, never gathers a batch."""
     target = NamedSharding(mesh, spec)
-    if isinstance(a, jax.core.Tracer):
+    if is_traced(a):
         return jax.sharding.reshard(a, target)
     if getattr(a, "sharding", None) == target:
         return a

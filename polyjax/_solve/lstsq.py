@@ -36,7 +36,7 @@ TALL_ROWS = 20_000
 
 
 class LstsqSolution(eqx.Module):
-    """Result of :func:`weighted_lstsq`.
+    """The result of :func:`weighted_lstsq`.
 
     Attributes:
         coefficients: ``(m, r)`` (or ``(m,)`` for a single right-hand side); 0 for inactive columns.

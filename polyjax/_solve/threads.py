@@ -27,6 +27,7 @@ import threading
 import jax
 from threadpoolctl import ThreadpoolController
 
+from .._arrays import is_traced
 from .._errors import InputError
 
 #: the environment variable: "1" (default), an integer, or "off"
@@ -101,7 +102,7 @@ class lapack_threads:
 def _wait(out):
     """Block until the concrete JAX arrays of ``out`` are computed (tracers and other leaves pass)."""
     for leaf in jax.tree.leaves(out):
-        if isinstance(leaf, jax.Array) and not isinstance(leaf, jax.core.Tracer):
+        if isinstance(leaf, jax.Array) and not is_traced(leaf):
             leaf.block_until_ready()
     return out
 

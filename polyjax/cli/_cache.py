@@ -52,11 +52,32 @@ def _files(folder: Path) -> list[tuple[Path, int, float]]:
     return out
 
 
+def _files_of(folder) -> tuple[Path, list[tuple[Path, int, float]]]:
+    """``folder`` as a path and its files (:func:`_files`; none when it is not a folder): the one walk of every
+    function below."""
+    folder = Path(folder)
+    return folder, _files(folder) if folder.is_dir() else []
+
+
+def _remove(files, enough=lambda removed: False) -> tuple[int, int]:
+    """Remove ``files`` (``(path, bytes, last use)``) in their order until ``enough(bytes removed)``; a file that
+    cannot be removed is skipped. Returns ``(files, bytes)`` removed."""
+    n = removed = 0
+    for p, s, _ in files:
+        if enough(removed):
+            break
+        try:
+            p.unlink()
+        except OSError:
+            continue
+        n, removed = n + 1, removed + s
+    return n, removed
+
+
 def cache_usage(folder: str | os.PathLike) -> dict:
     """``{"folder", "files", "bytes", "parts": {subfolder or ".": [files, bytes]}}`` of the cache folder."""
-    folder = Path(folder)
+    folder, files = _files_of(folder)
     parts: dict[str, list[int]] = {}
-    files = _files(folder) if folder.is_dir() else []
     for p, size, _ in files:
         rel = p.relative_to(folder).parts
         key = rel[0] if len(rel) > 1 else "."
@@ -68,37 +89,19 @@ def cache_usage(folder: str | os.PathLike) -> dict:
 
 def clear_cache(folder: str | os.PathLike) -> tuple[int, int]:
     """Remove every file under the cache folder (the folder itself stays); returns ``(files, bytes)`` removed."""
-    n = size = 0
-    folder = Path(folder)
-    for p, s, _ in _files(folder) if folder.is_dir() else []:
-        try:
-            p.unlink()
-        except OSError:
-            continue
-        n, size = n + 1, size + s
-    return n, size
+    return _remove(_files_of(folder)[1])
 
 
 def trim_cache(folder: str | os.PathLike, max_bytes: int | None) -> tuple[int, int]:
     """Keep the cache folder under ``max_bytes``: when over it, remove the least recently used files until it holds
     at most 80 % of it (so that not every run trims). Returns ``(files, bytes)`` removed; nothing is ever an error."""
-    folder = Path(folder)
-    if max_bytes is None or not folder.is_dir():
+    if max_bytes is None:
         return 0, 0
-    files = _files(folder)
+    _, files = _files_of(folder)
     total = sum(s for _, s, _ in files)
     if total <= max_bytes:
         return 0, 0
-    n = removed = 0
-    for p, s, _ in sorted(files, key=lambda f: f[2]):
-        if total - removed <= 0.8 * max_bytes:
-            break
-        try:
-            p.unlink()
-        except OSError:
-            continue
-        n, removed = n + 1, removed + s
-    return n, removed
+    return _remove(sorted(files, key=lambda f: f[2]), enough=lambda removed: total - removed <= 0.8 * max_bytes)
 
 
 def add_parser(sub, common) -> None:

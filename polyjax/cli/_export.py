@@ -13,8 +13,8 @@ from ..export._expr import program
 from ..export._glsl import brdf_explorer, glsl
 from ..export._merl import merl_binary
 from ..export._rgl import is_rgl_source, rgl_to_merl
-from ..export._standard import TARGETS, add_standard_arguments, run_standard_export
 from ..render._brdf import rgb_brdf
+from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
 
 FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
 

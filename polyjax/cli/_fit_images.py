@@ -137,7 +137,7 @@ def run_fit_images(args) -> int:
         scenes, images, variables=args.variables, degree=args.degree, target=target, saturation=args.saturation,
         cutoff_deg=args.cutoff, spp=args.spp, interactions=args.interactions,
     )
-    status = [pj.FitStatus(int(s)).name for s in np.asarray(model.status)]
+    status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     out = {
         "images": len(images), "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
         "degree": args.degree, "rms_residual_rgb": np.asarray(model.l2).tolist(), "status_rgb": status,

@@ -108,7 +108,7 @@ def run_fit_photos(args) -> int:
         cutoff_deg=None if args.cutoff >= 90 else args.cutoff, interactions=args.interactions, link=args.link,
         weighting=args.weighting, robust_steps=args.robust_steps)
     seconds = time.perf_counter() - t0
-    status = [pj.FitStatus(int(s)).name for s in np.asarray(model.status)]
+    status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     pj.save_model(save, model)
     out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
            "degree": args.degree, "interactions": bool(args.interactions), "link": args.link,

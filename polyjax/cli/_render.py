@@ -31,7 +31,7 @@ from ..render import (
     write_png,
 )
 from ..render._brdf import TabulatedBRDF
-from ._args import check_degrees_fit, parse_degrees
+from ._args import add_image_options, check_degrees_fit, parse_degrees
 
 
 def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
@@ -56,10 +56,9 @@ def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     r.add_argument("--reference", action="store_true", help="add the measured data as the first row, and PSNR")
     r.add_argument("--light", default="point",
                    help="point | directional | sky (procedural environment) | path to a lat-long .exr map")
-    r.add_argument("--size", type=int, default=256, help="pixels per sphere")
+    add_image_options(r, size_help="pixels per sphere", exposure_help="PNG exposure in stops")
     r.add_argument("--spp", type=int, default=64, help="environment samples per pixel")
     r.add_argument("--swap-uv", action="store_true", help="exchange light and view (reciprocity check, Fig. 8)")
-    r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops")
     r.add_argument("--out", default="render", help="output prefix: writes <out>.exr and <out>.png")
     return r
 

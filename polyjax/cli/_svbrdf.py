@@ -130,7 +130,7 @@ def run_svbrdf(args) -> int:
         parts = np.asarray(multihost_utils.process_allgather(np.array([sse, count, peak])))  # 3 scalars per process
         sse, count, peak = parts[:, 0].sum(), parts[:, 1].sum(), parts[:, 2].max()
     psnr = float(10 * np.log10(peak**2 / (sse / count))) if sse > 0 else float("inf")
-    status = np.asarray(jnp.sum(mine.status != pj.Result.OK))
+    status = np.asarray(jnp.sum(mine.status != pj.RESULTS.OK))
     summary = dict(texels=args.size**2, cameras=1 if cap.camera.ndim == 1 else int(cap.camera.shape[0]),
                    processes=jax.process_count(), devices=jax.device_count(),
                    fit_seconds=t_fit, texels_per_second=args.size**2 / t_fit, psnr_new_light=psnr,

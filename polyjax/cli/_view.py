@@ -15,6 +15,7 @@ from .._config import check_output_file, configured_data_root
 from .._errors import InputError
 from ..view._page import ViewSettings, write_page
 from ..view._serve import serve_page
+from ._args import add_image_options
 
 
 def _resolution(text: str) -> tuple[int, int, int]:
@@ -40,8 +41,8 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--serve", action="store_true",
                    help="then serve it on http://127.0.0.1:PORT/ (loopback only) until Ctrl-C")
     p.add_argument("--port", type=int, default=8000, help="port for --serve (default 8000; 0: any free port)")
-    p.add_argument("--size", type=int, default=256, help="canvas size in pixels (default 256)")
-    p.add_argument("--exposure", type=float, default=0.0, help="initial exposure in stops (default 0)")
+    add_image_options(p, size_help="canvas size in pixels (default 256)",
+                      exposure_help="initial exposure in stops (default 0)")
     p.add_argument("--environment", default=None, metavar="sky|FILE.exr",
                    help="also light the sphere with an environment map: the built-in sky or a latitude-longitude "
                    "OpenEXR map (averaged down to 16 x 32 texels)")

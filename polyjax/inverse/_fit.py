@@ -23,19 +23,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
+from .._arrays import is_concrete
 from .._basis import BASES
 from .._design import fitted_design as _design_for
 from .._errors import InputError
-from .._model import FitStatus, PolynomialBRDF
+from .._model import RESULTS, PolynomialBRDF
 from .._solve.lstsq import METHODS, weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from ._rows import image_rows
 from ._samples import WEIGHTINGS, fit_samples
-
-
-def _concrete(x) -> bool:
-    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
 
 
 @one_lapack_thread
@@ -143,7 +140,7 @@ def fit_polynomial_to_images(
     u, v, c, y, wpx, keep = rows.u, rows.v, rows.weight, rows.values, rows.pixel_weights, rows.keep
     # one design for the three channels when every light is grey (the same weights in R, G and B)
     shared = False
-    if _concrete(c):
+    if is_concrete(c):
         cn = np.asarray(c)
         shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
     return _solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
@@ -199,8 +196,8 @@ def _solve_images(u, v, c, y, wpx, keep, variables, degree, basis, interactions,
 
         coef, rms, rank, cond, n_act = jax.vmap(channel)(design, y.T)
     n_used = jnp.sum(keep).astype(jnp.int32)
-    status = jnp.where(n_used == 0, FitStatus.NO_SAMPLES,
-                       jnp.where(rank < n_act, FitStatus.RANK_DEFICIENT, FitStatus.OK)).astype(jnp.int32)
+    status = jnp.where(n_used == 0, RESULTS.NO_SAMPLES,
+                       jnp.where(rank < n_act, RESULTS.RANK_DEFICIENT, RESULTS.OK)).astype(jnp.int32)
     coef = jnp.where((n_used == 0), 0.0, coef)
     three = lambda a: jnp.broadcast_to(a, (3,) + jnp.shape(a))  # noqa: E731
     return PolynomialBRDF(

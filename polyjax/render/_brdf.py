@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import is_traced
 from .._directions import reflect, safe_normalize
 from .._errors import InputError
 from .._model import PolynomialBRDF
@@ -231,7 +232,7 @@ class TabulatedBRDF(eqx.Module):
         isotropic: use the rotation-invariant parametrisation.
         eps: regulariser of the weights (squared feature distance).
         """
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((u, v, values))):
+        if is_traced(u, v, values):
             self._init_traced(u, v, values, k, isotropic, eps)
             return
         u = np.asarray(u, dtype=float)

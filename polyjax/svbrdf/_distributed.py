@@ -11,6 +11,7 @@ start-up and the scalar summaries.
 
 from __future__ import annotations
 
+import socket
 from typing import Callable
 
 import jax
@@ -89,8 +90,6 @@ def fit_rows_distributed(load_rows: Callable[[int, int], dict], height: int, var
 
 def free_port() -> int:
     """A free TCP port on localhost (for a coordinator address in tests and examples)."""
-    import socket
-
     with socket.socket() as s:
         s.bind(("localhost", 0))
         return s.getsockname()[1]

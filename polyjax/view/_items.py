@@ -22,9 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InputError
+from .._errors import DataNotFoundError, InputError
+from .._io import load_model
 from .._measurements import Measurements
 from .._model import PolynomialBRDF
+from ..data._load import load
+from ..data._merl import directions_to_rusinkiewicz, merl_index
+from ..data._nbrdf import NeuralBRDF
+from ..export._expr import program
+from ..export._merl import tabulate_merl
 
 #: the MERL grid (theta_h, theta_d, phi_d bins), the default resolution of tables
 MERL_RESOLUTION = (90, 90, 180)
@@ -102,9 +108,6 @@ def _fit_info(model) -> dict:
 
 def model_items(model, name: str, resolution=MERL_RESOLUTION) -> list[ViewItem]:
     """The items of a fitted model: programs for what the expression builder covers, tables otherwise."""
-    from ..data._nbrdf import NeuralBRDF
-    from ..export._expr import program
-
     items = []
     for suffix, lane in _lanes(model, name):
         label = name + suffix
@@ -120,8 +123,6 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION) -> list[ViewItem]:
 
 
 def _tabulated(model, name: str, resolution) -> ViewItem:
-    from ..export._merl import tabulate_merl
-
     values, _ = tabulate_merl(model, resolution)
     table = np.asarray(values, np.float32).T.reshape(*resolution, 3)
     info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
@@ -141,8 +142,6 @@ def _rgb(values: np.ndarray) -> np.ndarray:
 
 def _binned(u, v, rgb, valid, resolution):
     """``(table (N_h, N_d, N_p, 3), filled fraction)``: the mean of the valid samples in each MERL bin."""
-    from ..data._merl import directions_to_rusinkiewicz, merl_index
-
     th, td, pd = directions_to_rusinkiewicz(u, v)
     idx = merl_index(th, td, pd, resolution)[valid]
     n = int(np.prod(resolution))
@@ -186,14 +185,12 @@ def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION) -> list
     """The items of one command-line argument: a saved model file (``.npz``/``.json``, ``FILE#i`` for lane ``i``)
     or a data set spec of :func:`polyjax.data.load` (``curet:25``, ``merl-nbrdf:green-latex``, ``cornell:cayman``,
     ``merl:<file>``)."""
-    import polyjax as pj
-
     path, sep, index = arg.rpartition("#")
     path = path if sep else arg
     if Path(path).suffix.lower() in (".npz", ".json"):
         if not Path(path).is_file():
-            raise pj.DataNotFoundError(f"{path!r}: no such model file")
-        model = pj.load_model(path)
+            raise DataNotFoundError(f"{path!r}: no such model file")
+        model = load_model(path)
         if sep:
             try:
                 model = model[int(index)]
@@ -204,7 +201,7 @@ def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION) -> list
     if ":" not in arg:
         raise InputError(f"{arg!r}: expected a saved model (.npz or .json) or a data set spec such as curet:25, "
                          "merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>")
-    return data_items(pj.data.load(arg, root=root), arg, resolution)
+    return data_items(load(arg, root=root), arg, resolution)
 
 
 def as_items(objects, resolution=MERL_RESOLUTION, root=None) -> list[ViewItem]:

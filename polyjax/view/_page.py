@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._config import check_output_file
 from .._errors import InputError
 from ._environment import environment_json
 from ._glsl import brdf_functions
@@ -114,8 +115,6 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
 
     The text is built completely before the file is opened (no half-written page). Returns the path written.
     """
-    from .._config import check_output_file
-
     path = check_output_file(path, "out")
     _check_settings(settings)  # before the items' work
     text = page_html(as_items(objects, resolution, root), settings)

@@ -15,7 +15,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import jax
 import numpy as np
+
+import polyjax as pj
+
+from .. import export
+from .._io import fitter_for
 
 #: target -> (standard model fitted, writer in :mod:`polyjax.export`, default suffix)
 TARGETS: dict[str, tuple[str, str, str]] = {
@@ -53,8 +59,6 @@ def _tabulated(model, n: int, seed: int = 0):
 
 def _source(args):
     """The measurements to fit: a saved model tabulated, or a data set; values ``(*batch, 3, n)``."""
-    import polyjax as pj
-
     src = str(args.model)
     if Path(src).suffix.lower() in (".npz", ".json") and Path(src).exists():
         if not isinstance(args.samples, int) or args.samples < 100:
@@ -69,8 +73,6 @@ def _source(args):
 
 def _one_material(data, index, src):
     """``data`` with values ``(3, n)``: a grey model's channel repeated, a batch's material ``index``."""
-    import polyjax as pj
-
     values = np.asarray(data.values)
     n = values.shape[-1]
     if values.ndim == 1 or values.shape[:-1] == (1,):
@@ -108,13 +110,6 @@ def log_error(values, predicted, u, v, weights, mask, cutoff_deg: float = 80.0) 
 
 def run_standard_export(args) -> int:
     """Fit the target's standard model to ``args.model`` and write it (see the module docs)."""
-    import jax
-
-    import polyjax as pj
-
-    from .. import export
-    from .._io import fitter_for
-
     jax.config.update("jax_enable_x64", True)
     name, writer, suffix = TARGETS[args.to]
     out = Path(args.out) if args.out else Path(Path(str(args.model)).stem + suffix)
