@@ -130,7 +130,7 @@ def fit(
 
     A standard material model (:data:`baselines.STANDARD_MODELS`: ``gltf-pbr``, ``principled``, ...) fits the
     R, G, B channels of each material jointly: ``values (..., 3, n)``, its shared parameters (roughness, metallic,
-    ...) one per material, its colours per channel (:mod:`baselines._joint`); ``params`` stays per channel
+    ...) one per material, its colours per channel (:mod:`baselines._models.joint`); ``params`` stays per channel
     ``(..., 3, P)`` (shared values repeated), ``l2`` per channel, result codes, steps and starts those of the
     material, repeated for its channels; ``starts`` are then ``(..., S, Pj)`` in the joint layout.
 

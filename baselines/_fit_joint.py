@@ -1,5 +1,6 @@
-"""The fit of a standard material model: the three colour channels of each material jointly (:mod:`baselines._joint`),
-then the result in the per-channel layout of every other baseline fit (``params (..., 3, P)``, ``l2`` per channel)."""
+"""The fit of a standard material model: the three colour channels of each material jointly
+(:mod:`baselines._models.joint`), then the result in the per-channel layout of every other baseline fit
+(``params (..., 3, P)``, ``l2`` per channel)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 r"""The BSDF pieces of MaterialX 1.39's physically based shading library (``libraries/pbrlib``), as its GLSL code
 generator writes them (``pbrlib/genglsl/lib/mx_microfacet*.glsl``), in JAX: the closures OpenPBR Surface is built of
-(:mod:`baselines._openpbr`).
+(:mod:`baselines._models.openpbr`).
 
 Each function names the GLSL function it follows. Cosines are clamped to ``[M_FLOAT_EPS, 1]`` as the GLSL does
 (``M_FLOAT_EPS = 1e-8``); square roots that the GLSL takes of values that may reach 0 (``sin`` at normal incidence)

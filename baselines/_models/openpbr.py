@@ -1,6 +1,6 @@
 r"""OpenPBR Surface's opaque base, specular and coat lobes, as MaterialX 1.39 defines them (the node graph
 ``NG_open_pbr_surface_surfaceshader`` of ``libraries/bxdf/open_pbr_surface.mtlx``, OpenPBR 1.1, evaluated by its
-GLSL closures, :mod:`baselines._mx_microfacet`).
+GLSL closures, :mod:`baselines._models.mx_microfacet`).
 
 The BRDF of one colour channel, ``u`` the light ``L`` and ``v`` the view ``V`` (normal ``+z``, tangent ``+x``):
 

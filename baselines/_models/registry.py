@@ -57,7 +57,7 @@ PAPER_MODELS: tuple[str, ...] = MODELS[:8]
 NONLINEAR_MODELS: tuple[str, ...] = MODELS[:7]
 #: The standard material models (one roughness, metallic, ... for R, G, B: fitted jointly over the channels).
 STANDARD_MODELS: tuple[str, ...] = tuple(m.name for m in _ALL if m.shared_across_channels)
-# their joint R, G, B records, found by get_model under "<name>:rgb" (baselines._joint)
+# their joint R, G, B records, found by get_model under "<name>:rgb" (baselines._models.joint)
 _JOINT = {m.name + SUFFIX: joint_model(m) for m in _ALL if m.shared_across_channels}
 
 

@@ -1,4 +1,4 @@
-"""Ward-Duer (Ward's lobe with Duer's normalisation, Lambertian diffuse): the Ward model (:mod:`baselines._ward`)
+"""Ward-Duer (Ward's lobe with Duer's normalisation, Lambertian diffuse): the Ward model (:mod:`baselines._models.ward`)
 with another normalisation, its parameters, ranges and starts unchanged."""
 
 from __future__ import annotations
