@@ -13,9 +13,9 @@ The program takes the inputs traced, so it is the fit a ``jit``-ted call of :fun
 that is the eager call's result too: data below :data:`polyjax._fit.stream.STREAM_ROWS` samples, finite values and
 directions (an eager call raises on NaN where a traced one flags the lane). Options the fit refuses return None
 before any work (the ordinary call then raises its error); anything unexpected while saving or loading (a stale or
-unreadable file, a program that does not serialise) is logged once with its reason (logger ``polyjax``, level
-WARNING) and falls back to the ordinary call. ``POLYJAX_SAVED_PROGRAMS=off`` turns this off (the compilation cache
-alone then serves a warm run).
+unreadable file, a program that does not serialise) is logged once per file with its reason (logger ``polyjax``,
+level WARNING) and falls back to the ordinary call. ``POLYJAX_SAVED_PROGRAMS=off`` turns this off (the compilation
+cache alone then serves a warm run).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ ENV = "POLYJAX_SAVED_PROGRAMS"
 _FIELDS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used",
            "status")
 _LOG = logging.getLogger("polyjax")
-_LOGGED: set[str] = set()
+_LOGGED: set[tuple[str, str]] = set()
 
 
 def _usable(data) -> bool:
@@ -71,12 +71,13 @@ def _load_lapack() -> None:
     _lapack.initialize()
 
 
-def _warn_once(what: str, error: BaseException) -> None:
-    """Log (once per process and kind of failure) why the saved program was not used; the caller then fits as usual."""
-    reason = f"{what}: {type(error).__name__}: {error}"
-    if what not in _LOGGED:
-        _LOGGED.add(what)
-        _LOG.warning("polyjax: saved fit program not used (%s); fitting without it", reason)
+def _warn_once(what: str, path: Path, error: BaseException) -> None:
+    """Log (once per process, kind of failure and file) why the saved program was not used; the caller then fits as
+    usual."""
+    if (what, str(path)) not in _LOGGED:
+        _LOGGED.add((what, str(path)))
+        _LOG.warning("polyjax: saved fit program %s not used (%s: %s: %s); fitting without it", path, what,
+                     type(error).__name__, error)
 
 
 def _options(data, options: dict):
@@ -99,7 +100,7 @@ def _load(path: Path):
         _load_lapack()
         return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
     except Exception as e:  # noqa: BLE001 - a stale or damaged file: logged, compiled again
-        _warn_once("reading the kept program failed", e)
+        _warn_once("reading the kept program failed", path, e)
         return None
 
 
@@ -118,7 +119,7 @@ def fit_saved(data, folder: Path | None, **options):
     """``(model, zero_model_l2)`` of :func:`polyjax.fit_polynomial` on ``data`` (a :class:`polyjax.Measurements`)
     with ``options`` (``variables``, ``degree``, ``basis``, ``interactions``, ``cutoff_deg``), from the executable
     kept in ``folder``/:data:`FOLDER` (written there on the first call); None when this path does not apply or fails
-    (then the caller fits as usual; a failure is logged once with its reason)."""
+    (then the caller fits as usual; a failure is logged once per file, with its reason)."""
     if folder is None or os.environ.get(ENV, "").strip().lower() in ("off", "0", "no", "false") or not _usable(data):
         return None
     checked = _options(data, options)
@@ -126,14 +127,14 @@ def fit_saved(data, folder: Path | None, **options):
         return None
     vs, opts = checked
     arrays = (data.u, data.v, data.values, data.weights, data.mask)
+    path = Path(folder) / FOLDER / f"fit-{program_key(arrays, opts)}.bin"
     try:
-        path = Path(folder) / FOLDER / f"fit-{program_key(arrays, opts)}.bin"
         compiled = _load(path)
         if compiled is None:
             compiled = _compile_and_keep(opts, arrays, path)
         fields, zero = compiled(*arrays)
     except Exception as e:  # noqa: BLE001 - logged; the ordinary call decides (and raises what it raises)
-        _warn_once("the saved fit program failed", e)
+        _warn_once("the saved fit program failed", path, e)
         return None
     interactions = bool(opts["interactions"])
     max_degree = int(np.max(opts["degree"]))
