@@ -9,34 +9,45 @@ compact models whose fits of the 100 MERL materials are published (:func:`publis
 point (``jax.config.update("jax_enable_x64", True)``).
 """
 
-from ._abc import abc
+import warnings
+
+from polyjax import RESULTS
+
 from ._aot import SavedProgramWarning
-from ._ashikhmin_shirley import ashikhmin_shirley
-from ._blinn_phong import blinn_phong
-from ._common import BaselineModel, Transform
-from ._cook_torrance import cook_torrance
 from ._fit import fit
 from ._fit_images import fit_to_images
-from ._gltf_pbr import gltf_brdf, gltf_pbr
-from ._lafortune import lafortune
-from ._lafortune_anisotropic import lafortune_anisotropic
-from ._oren_nayar import oren_nayar
-from ._principled import principled, principled_brdf
+from ._models.abc import abc
+from ._models.ashikhmin_shirley import ashikhmin_shirley
+from ._models.blinn_phong import blinn_phong
+from ._models.common import BaselineModel, Transform
+from ._models.cook_torrance import cook_torrance
+from ._models.gltf_pbr import gltf_brdf, gltf_pbr
+from ._models.lafortune import lafortune
+from ._models.lafortune_anisotropic import lafortune_anisotropic
+from ._models.oren_nayar import oren_nayar
+from ._models.principled import principled, principled_brdf
+from ._models.registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, STANDARD_MODELS, get_model
+from ._models.sgd import sgd
+from ._models.ward import ward
+from ._models.ward_anisotropic import ward_anisotropic
+from ._models.ward_duer import ward_duer
+from ._models.zernike import disk_point, n_zernike_terms, zernike, zernike_design, zernike_terms
+from ._multistart import BACKENDS, residuals
 from ._published import published, published_materials
-from ._registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, STANDARD_MODELS, get_model
-from ._result import BaselineFit, BaselineStatus
+from ._result import BaselineFit, standard_material
 from ._saving import KIND as SAVED_MODEL_KIND
-from ._sgd import sgd
-from ._solvers import BACKENDS, residuals
-from ._standard import standard_material
 from ._starts import initial_guesses
-from ._ward import ward
-from ._ward_anisotropic import ward_anisotropic
-from ._ward_duer import ward_duer
-from ._zernike import disk_point, n_zernike_terms, zernike, zernike_design, zernike_terms
+
+
+def __getattr__(name):
+    if name == "BaselineStatus":  # a former name of polyjax.RESULTS
+        warnings.warn("baselines.BaselineStatus is deprecated: use polyjax.RESULTS", DeprecationWarning, stacklevel=2)
+        return RESULTS
+    raise AttributeError(f"module 'baselines' has no attribute {name!r}")
+
 
 __all__ = [
-    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "BaselineStatus", "MODELS", "NONLINEAR_MODELS",
+    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "MODELS", "NONLINEAR_MODELS",
     "PAPER_MODELS", "Transform", "abc", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit",
     "fit_to_images", "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms",
     "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",

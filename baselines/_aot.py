@@ -34,7 +34,9 @@ import jax
 import numpy as np
 
 import polyjax as pj
-from polyjax._aot import ENV, FOLDER, _key, _load_lapack, _source_stamp
+from polyjax.internal import SAVED_PROGRAMS_ENV as ENV
+from polyjax.internal import SAVED_PROGRAMS_FOLDER as FOLDER
+from polyjax.internal import cache_disabled_by_env, load_lapack_kernels, program_key, source_stamp
 
 from ._result import BaselineFit
 
@@ -71,7 +73,7 @@ def _stamp() -> str:
     """polyjax's source stamp and the size and modification time of every baselines source file."""
     if not _STAMP:
         root = Path(__file__).resolve().parent
-        h = hashlib.sha256(_source_stamp().encode())
+        h = hashlib.sha256(source_stamp().encode())
         for p in sorted(root.rglob("*.py")):
             st = p.stat()
             h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns};".encode())
@@ -82,7 +84,6 @@ def _stamp() -> str:
 def saved_folder() -> Path | None:
     """``<compilation cache folder>/polyjax-programs`` when JAX's persistent compilation cache is on and neither
     ``POLYJAX_SAVED_PROGRAMS`` nor ``POLYJAX_CACHE`` is off; else None."""
-    from polyjax._cache import cache_disabled_by_env
 
     if os.environ.get(ENV, "").strip().lower() in _OFF or cache_disabled_by_env():
         return None
@@ -138,7 +139,7 @@ def _load(path: Path):
         return None
     try:
         payload, in_tree, out_tree, backend = pickle.loads(path.read_bytes())
-        _load_lapack()
+        load_lapack_kernels()
         from jax.experimental import serialize_executable
 
         return serialize_executable.deserialize_and_load(payload, in_tree, out_tree), backend
@@ -152,7 +153,7 @@ def _path(folder: Path, name: str, arrays, options: dict) -> Path:
     device = jax.devices()[0]
     opts = dict(options, baselines_source=_stamp(), model=name, given="".join("01"[a is not None] for a in arrays),
                 compiler=sorted(COMPILER_OPTIONS.items()), device=f"{device.platform}:{device.device_kind}")
-    return folder / f"baseline-{_key([a for a in arrays if a is not None], opts)}.bin"
+    return folder / f"baseline-{program_key([a for a in arrays if a is not None], opts)}.bin"
 
 
 def _compile(fit, name: str, options: dict, arrays, path: Path):

@@ -34,19 +34,19 @@ import jax.numpy as jnp
 import numpy as np
 
 import polyjax as pj
-from polyjax import InputError, Result, one_lapack_thread, raise_on_status
+from polyjax import RESULTS, InputError
+from polyjax.internal import is_concrete, one_lapack_thread, prepare_inputs, raise_on_status
 
 from ._aot import fit_saved
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
-from ._joint import SUFFIX
-from ._multistart import fit_kernel
-from ._registry import get_model
+from ._jaxopt import staged_kernel
+from ._models.joint import SUFFIX
+from ._models.registry import get_model
+from ._models.zernike import fit_zernike
+from ._multistart import BACKENDS, fit_kernel
 from ._result import BaselineFit
-from ._solvers import BACKENDS
-from ._staged import staged_kernel
 from ._starts import check_n_starts
-from ._zernike import fit_zernike
 
 
 @one_lapack_thread
@@ -94,7 +94,7 @@ def fit(
         n_starts: number of starting points per lane (deterministic guesses first, then random).
         key: ``jax.random.PRNGKey`` for the random starts (``PRNGKey(0)`` when None).
         backend: ``"optimistix"`` (``optimistix.LevenbergMarquardt``) or ``"jaxopt"``
-            (``jaxopt.LevenbergMarquardt``, imported only when asked for).
+            (``jaxopt.LevenbergMarquardt``).
         max_steps: step limit per start (both stages together).
         limit_steps: steps given to a kept start that ran out of steps next to its range limits,
             once put on them (at most twice, so up to ``2 * limit_steps`` beyond ``max_steps``);
@@ -133,13 +133,13 @@ def fit(
 
     A standard material model (:data:`baselines.STANDARD_MODELS`: ``gltf-pbr``, ``principled``, ...) fits the
     R, G, B channels of each material jointly: ``values (..., 3, n)``, its shared parameters (roughness, metallic,
-    ...) one per material, its colours per channel (:mod:`baselines._joint`); ``params`` stays per channel
+    ...) one per material, its colours per channel (:mod:`baselines._models.joint`); ``params`` stays per channel
     ``(..., 3, P)`` (shared values repeated), ``l2`` per channel, result codes, steps and starts those of the
     material, repeated for its channels; ``starts`` are then ``(..., S, Pj)`` in the joint layout.
 
     Returns:
         :class:`BaselineFit` with batch shape ``values.shape[:-1]``. A lane whose kept start did not
-        converge has ``success = False`` and its :class:`polyjax.Result` code; parameters are never NaN.
+        converge has ``success = False`` and its :class:`polyjax.RESULTS` code; parameters are never NaN.
     """
     model = get_model(name)
     if backend not in BACKENDS:
@@ -150,7 +150,7 @@ def fit(
     saved = fit_saved(fit, model.name, u, v, values, weights, mask, starts, key, throw, options)  # baselines/_aot.py
     if saved is not None:
         return saved
-    inp, cutoff = pj.prepare_inputs("fit", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
+    inp, cutoff = prepare_inputs("fit", u, v, values, weights, mask, cutoff_deg=cutoff_deg, nonfinite=nonfinite)
     wl, wc2 = inp.objective_weights(cutoff)
     if model.linear:
         out = fit_zernike(inp.u, inp.v, inp.values, wl, wc2, order)
@@ -179,7 +179,7 @@ def _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> 
             jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
     out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
     out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
-    out["success"] = (out["status"] == Result.OK) & jnp.isfinite(out["l2"])
+    out["success"] = (out["status"] == RESULTS.OK) & jnp.isfinite(out["l2"])
     return out
 
 
@@ -196,9 +196,9 @@ def _shaped(out: dict, lane_bad, *, batch: tuple) -> dict:
 
     One result code for every fitter: NaN/inf values in a lane (flagged under jit) and an overflowing L2 are
     NONFINITE, as in the polynomial fit; a NONFINITE lane's L2 is inf."""
-    status = jnp.where(lane_bad, Result.NONFINITE, out["status"])
-    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status).astype(jnp.int32)
-    out = dict(out, status=status, success=out["success"] & (status == Result.OK),
+    status = jnp.where(lane_bad, RESULTS.NONFINITE, out["status"])
+    status = jnp.where((status == RESULTS.OK) & ~jnp.isfinite(out["l2"]), RESULTS.NONFINITE, status).astype(jnp.int32)
+    out = dict(out, status=status, success=out["success"] & (status == RESULTS.OK),
                l2=jnp.where(lane_bad, jnp.inf, out["l2"]))
     return {k: a.reshape(batch + a.shape[1:]) for k, a in out.items()}
 
@@ -226,6 +226,6 @@ def _check_starts(model, starts, dtype, batch, max_steps, limit_steps):
         raise InputError(f"starts: expected shape (..., S, {model.n_params}), found {raw0.shape}")
     nb = int(np.prod(batch)) if batch else 1
     raw0 = jnp.broadcast_to(raw0, batch + raw0.shape[-2:]).reshape((nb,) + raw0.shape[-2:])
-    if pj.is_concrete(raw0) and not bool(jnp.all(jnp.isfinite(raw0))):
+    if is_concrete(raw0) and not bool(jnp.all(jnp.isfinite(raw0))):
         raise InputError("starts: expected finite unconstrained parameters")
     return raw0

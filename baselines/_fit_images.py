@@ -30,12 +30,13 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 import polyjax as pj
-from polyjax import InputError, Result, one_lapack_thread, raise_on_status
+from polyjax import RESULTS, InputError
+from polyjax.internal import is_concrete, one_lapack_thread, raise_on_status
 
 from ._fit import fit
 from ._light_sums import light_sum_kernel, package
 from ._light_sums_joint import joint_light_sum_kernel, joint_package
-from ._registry import get_model
+from ._models.registry import get_model
 from ._result import BaselineFit
 from ._starts import check_n_starts
 
@@ -101,7 +102,7 @@ def fit_to_images(
     check_n_starts(n_starts)
     rows = pj.image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
                          cutoff_deg=cutoff_deg, spp=spp, seed=seed)
-    if pj.is_concrete(rows.keep) and not bool(np.any(np.asarray(rows.keep))):
+    if is_concrete(rows.keep) and not bool(np.any(np.asarray(rows.keep))):
         raise InputError("images: no pixel is kept (on the target, lit, unsaturated, within the cutoff)")
     if rows.u.shape[1] == 1:
         return _fit_one_sample(model.name, rows, n_starts, key, fit_options)
@@ -143,7 +144,7 @@ def _fit_light_sums(name, rows, n_starts, key, fit_options) -> BaselineFit:
     )
     out["raw"], out["params"], out["l2"] = pack(name, out["raw"], rows.u, rows.v, c, y, rows.pixel_weights)
     status = out["status"]
-    status = jnp.where((status == Result.OK) & ~jnp.isfinite(out["l2"]), Result.NONFINITE, status)
-    out.update(status=status.astype(jnp.int32), success=(status == Result.OK) & jnp.isfinite(out["l2"]))
+    status = jnp.where((status == RESULTS.OK) & ~jnp.isfinite(out["l2"]), RESULTS.NONFINITE, status)
+    out.update(status=status.astype(jnp.int32), success=(status == RESULTS.OK) & jnp.isfinite(out["l2"]))
     fitted = BaselineFit(**out, name=name)
     return raise_on_status("fit_to_images", fitted.status, fitted) if opts["throw"] else fitted

@@ -1,5 +1,6 @@
-"""The fit of a standard material model: the three colour channels of each material jointly (:mod:`baselines._joint`),
-then the result in the per-channel layout of every other baseline fit (``params (..., 3, P)``, ``l2`` per channel)."""
+"""The fit of a standard material model: the three colour channels of each material jointly
+(:mod:`baselines._models.joint`), then the result in the per-channel layout of every other baseline fit
+(``params (..., 3, P)``, ``l2`` per channel)."""
 
 from __future__ import annotations
 
@@ -9,13 +10,13 @@ import jax
 import jax.numpy as jnp
 
 import polyjax as pj
-from polyjax import InputError, Result
+from polyjax import RESULTS, InputError
 
 from ._implicit import implicit_optimum
-from ._joint import SUFFIX, channel_index, joint_lanes, per_channel
+from ._jaxopt import staged_kernel
+from ._models.joint import SUFFIX, channel_index, joint_lanes, per_channel
+from ._models.registry import get_model
 from ._multistart import fit_kernel
-from ._registry import get_model
-from ._staged import staged_kernel
 
 
 def check_channels(model, batch: tuple) -> None:
@@ -57,5 +58,5 @@ def _package(name, out, u, v, y, wl, wc2):
     fields = {k: rep(out[k]) for k in ("status", "steps", "start_l2", "start_status", "best_start")}
     rows = jnp.arange(3 * m)
     at_limit = rep(out["at_limit"])[rows[:, None], jnp.asarray(channel_index(model))[rows % 3]]
-    success = (fields["status"] == Result.OK) & jnp.isfinite(l2)
+    success = (fields["status"] == RESULTS.OK) & jnp.isfinite(l2)
     return dict(fields, raw=raw, params=params, l2=l2, at_limit=at_limit, success=success)

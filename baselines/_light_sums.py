@@ -24,12 +24,12 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from polyjax import Result
+from polyjax import RESULTS
 
 from ._implicit import implicit_least_squares, safe_sqrt
 from ._lm import lm_solve
-from ._registry import get_model
-from ._staged import _LIMIT_TOL, _at, _pick
+from ._models.registry import get_model
+from ._multistart import _LIMIT_TOL, _at, _pick
 from ._starts import _linear_seed, _nonlinear_starts
 
 _UP = (0.0, 0.0, 1.0)
@@ -93,7 +93,7 @@ def light_sum_kernel(name, u, v, c, y, wpx, key, *, n_starts, max_steps, stage_s
         res = fn(raw, lane)
         loss = jnp.sum(res * res)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
-        return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
+        return raw, jnp.where(finite, code, RESULTS.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
     raw0 = _starts(model, su, sv, c, y, sw, key, n_starts)  # (B, S, P)
     first = jnp.minimum(stage_steps, max_steps)
@@ -101,16 +101,16 @@ def light_sum_kernel(name, u, v, c, y, wpx, key, *, n_starts, max_steps, stage_s
     raw_s, code_s, steps_s, l2_s = (jnp.swapaxes(a, 0, 1) for a in stage1)  # (B, S, ...)
     best = _pick(l2_s, code_s).astype(jnp.int32)
     raw_b, code_b, steps_b = _at(raw_s, best), _at(code_s, best), _at(steps_s, best)
-    budget = jnp.where(code_b == Result.OK, 0, max(max_steps - stage_steps, 0))
+    budget = jnp.where(code_b == RESULTS.OK, 0, max(max_steps - stage_steps, 0))
     raw2, code2, steps2, l22 = jax.vmap(solve)(raw_b, budget, lanes)
-    done = code_b == Result.OK  # converged in stage 1: keep its stage-1 state (a budget of 0 reports MAX_STEPS)
+    done = code_b == RESULTS.OK  # converged in stage 1: keep its stage-1 state (a budget of 0 reports MAX_STEPS)
     raw2, code2, l22 = jnp.where(done[:, None], raw_b, raw2), jnp.where(done, code_b, code2), jnp.where(
         done, _at(l2_s, best), l22)
     rows = jnp.arange(best.shape[0])
     ok = jnp.all(jnp.isfinite(raw2), axis=-1)
-    code2 = jnp.where(jnp.any(wpx > 0), code2, Result.NO_SAMPLES)
+    code2 = jnp.where(jnp.any(wpx > 0), code2, RESULTS.NO_SAMPLES)
     return dict(
-        raw=jnp.where(ok[:, None], raw2, raw0[:, 0]), status=jnp.where(ok, code2, Result.NONFINITE).astype(jnp.int32),
+        raw=jnp.where(ok[:, None], raw2, raw0[:, 0]), status=jnp.where(ok, code2, RESULTS.NONFINITE).astype(jnp.int32),
         steps=(steps_b + steps2).astype(jnp.int32), start_l2=l2_s.at[rows, best].set(l22) * scale,
         start_status=code_s.at[rows, best].set(code2).astype(jnp.int32), best_start=best,
         at_limit=model.snap_to_limits(raw2, _LIMIT_TOL)[1],

@@ -23,14 +23,14 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from polyjax import Result
+from polyjax import RESULTS
 
 from ._implicit import implicit_least_squares, safe_sqrt
-from ._joint import SUFFIX, channel_index
+from ._models.joint import SUFFIX, channel_index
 from ._light_sums import _safe_directions, light_sum_residual
 from ._lm import lm_solve
-from ._registry import get_model
-from ._staged import _LIMIT_TOL, _pick
+from ._models.registry import get_model
+from ._multistart import _LIMIT_TOL, _pick
 from ._starts import _nonlinear_starts
 
 
@@ -62,17 +62,17 @@ def joint_light_sum_kernel(name, u, v, c, y, wpx, key, *, n_starts, max_steps, s
         raw, code, steps = lm_solve(fn, r0, lane, budget, rtol, atol)
         loss = jnp.sum(fn(raw, lane) ** 2)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
-        return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
+        return raw, jnp.where(finite, code, RESULTS.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
     raw0 = joint.to_raw(_nonlinear_starts(joint, n_starts, key).astype(y.dtype))  # (S, Pj)
     raw_s, code_s, steps_s, l2_s = jax.lax.map(lambda r0: solve(r0, jnp.minimum(stage_steps, max_steps)), raw0)
     best = _pick(l2_s, code_s).astype(jnp.int32)
-    done = code_s[best] == Result.OK  # converged in stage 1: its stage-1 state (a budget of 0 reports MAX_STEPS)
+    done = code_s[best] == RESULTS.OK  # converged in stage 1: its stage-1 state (a budget of 0 reports MAX_STEPS)
     raw2, code2, steps2, l22 = solve(raw_s[best], jnp.where(done, 0, max(max_steps - stage_steps, 0)))
     raw2, code2, l22 = (jnp.where(done, a, b) for a, b in ((raw_s[best], raw2), (code_s[best], code2),
                                                             (l2_s[best], l22)))
     ok = jnp.all(jnp.isfinite(raw2))
-    code2 = jnp.where(jnp.any(wpx > 0), jnp.where(ok, code2, Result.NONFINITE), Result.NO_SAMPLES)
+    code2 = jnp.where(jnp.any(wpx > 0), jnp.where(ok, code2, RESULTS.NONFINITE), RESULTS.NO_SAMPLES)
     raw2 = jnp.where(ok, raw2, raw0[0])
     rep = lambda a: jnp.broadcast_to(a, (3,) + jnp.shape(a))  # noqa: E731
     return dict(

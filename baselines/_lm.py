@@ -15,7 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from polyjax import Result
+from polyjax import RESULTS
 
 if TYPE_CHECKING:
     import optimistix as optx
@@ -38,7 +38,7 @@ def lm_solve(fn, raw0, args, budget, rtol, atol):
 
     The same iteration as ``optimistix.least_squares`` (``init``, then ``step`` while not ``terminate``), with the
     step limit a run-time value: a budget of 0 returns ``raw0`` at once. Returns ``(raw, code, steps)`` with
-    ``code`` a :class:`polyjax.Result` (``OK`` converged, ``MAX_STEPS`` budget spent, ``NONFINITE``, ``FAILED``).
+    ``code`` a :class:`polyjax.RESULTS` (``OK`` converged, ``MAX_STEPS`` budget spent, ``NONFINITE``, ``FAILED``).
     Not differentiable (a while loop); the fit differentiates its optimum by the implicit function theorem.
     """
     import optimistix as optx
@@ -69,9 +69,9 @@ def lm_solve(fn, raw0, args, budget, rtol, atol):
 
     y, n, _, t, res = jax.lax.while_loop(cond, body, (raw0, jnp.array(0), dyn0, t0, res0))
     code = jnp.where(
-        (res == r.successful) & t, Result.OK,
+        (res == r.successful) & t, RESULTS.OK,
         jnp.where(
-            res == r.successful, Result.MAX_STEPS, jnp.where(res == r.nonfinite, Result.NONFINITE, Result.FAILED)
+            res == r.successful, RESULTS.MAX_STEPS, jnp.where(res == r.nonfinite, RESULTS.NONFINITE, RESULTS.FAILED)
         ),
     )
     return y, code.astype(jnp.int32), n.astype(jnp.int32)

@@ -13,7 +13,7 @@ loop is traced and compiled once per (model, shapes) whatever the stages:
   :data:`_LIMIT_TOLS` (``ceil(2 / R)`` jobs), ``limit_steps`` steps for lanes that need it and 0 for the others.
 
 A job's work is that of its block, so the stages cost what separate solves of the same sizes cost; the jaxopt
-backend keeps its own staged kernel (:mod:`baselines._staged`).
+backend keeps its own staged kernel (:mod:`baselines._jaxopt`).
 """
 
 from __future__ import annotations
@@ -23,14 +23,15 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
+import optimistix as optx
 
-from polyjax import Result
+from polyjax import RESULTS
 
 from ._lm import lm_solve
-from ._registry import get_model
-from ._solvers import residual_fn
-from ._staged import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, prepare_lanes
+from ._models.registry import get_model
+from ._starts import starts as make_starts
 
 _A, _B, _C = 0, 1, 2  # job kinds: stage 1, stage 2, range-limit round
 
@@ -44,7 +45,7 @@ def _solve_block(model, u, v, y, sw, scale, raw0, budget, rtol, atol):
         res = fn(raw, (yb, swb))
         loss = jnp.sum(res * res)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(raw))
-        return raw, jnp.where(finite, code, Result.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
+        return raw, jnp.where(finite, code, RESULTS.NONFINITE), steps, jnp.where(finite, jnp.sqrt(loss), jnp.inf)
 
     if raw0.shape[1] == 1:  # one start per lane and job (refine=1, the default): one vmap level traces in half
         raw, code, steps, l2 = (a[:, None] for a in jax.vmap(one)(raw0[:, 0], budget[:, 0], y, sw))
@@ -119,7 +120,7 @@ def _initial_carry(raw0, plan: _Plan) -> dict:
     nb, ns, npar = raw0.shape
     i32, f, ncand = jnp.int32, raw0.dtype, plan.n_cand
     return dict(
-        raw=raw0, code=jnp.full((nb, ns), Result.MAX_STEPS, i32), steps=jnp.zeros((nb, ns), i32),
+        raw=raw0, code=jnp.full((nb, ns), RESULTS.MAX_STEPS, i32), steps=jnp.zeros((nb, ns), i32),
         sl2=jnp.full((nb, ns), jnp.inf, f), order=jnp.zeros((nb, plan.r), i32),
         best=jnp.zeros((nb,), i32), raw_b=raw0[:, 0], code_b=jnp.zeros((nb,), i32), l2_b=jnp.zeros((nb,), f),
         steps_b=jnp.zeros((nb,), i32), retry=jnp.zeros((nb,), bool), cand=jnp.zeros((nb, ncand, npar), f),
@@ -151,7 +152,7 @@ def _prep_a(plan: _Plan, j, c):
 
 def _prep_b(plan: _Plan, j, c):
     order = jnp.argsort(c["sl2"], axis=1)[:, :plan.r].astype(jnp.int32)
-    done = jnp.take_along_axis(c["code"], order, axis=1) == Result.OK
+    done = jnp.take_along_axis(c["code"], order, axis=1) == RESULTS.OK
     block = jnp.take_along_axis(c["raw"], order[..., None], axis=1)
     return dict(c, order=order), block, jnp.where(done, 0, max(plan.max_steps - plan.stage_steps, 1)).astype(jnp.int32)
 
@@ -159,7 +160,7 @@ def _prep_b(plan: _Plan, j, c):
 def _prep_c(plan: _Plan, model, j, c):
     sub = _round_job(plan, j)
     snapped = [model.snap_to_limits(c["raw_b"], tol) for tol in _LIMIT_TOLS]  # candidates, tightest first
-    retry = (c["code_b"] == Result.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
+    retry = (c["code_b"] == RESULTS.MAX_STEPS) & jnp.any(snapped[-1][1], axis=-1)
     cand = jnp.stack([jnp.where(retry[:, None], s, c["raw_b"]) for s, _ in snapped], axis=1)
     cand = jnp.concatenate([cand, jnp.repeat(cand[:, -1:], plan.n_cand - cand.shape[1], axis=1)], axis=1)
     first = sub == 0  # a round's candidates are made by its first job
@@ -180,7 +181,7 @@ def _store_b(j, c, res):
     order = c["order"]
     rows = jnp.arange(order.shape[0])[:, None]
     take = lambda a: jnp.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa
-    d = take(c["code"]) == Result.OK  # converged in stage 1: keep its stage-1 state
+    d = take(c["code"]) == RESULTS.OK  # converged in stage 1: keep its stage-1 state
     c = dict(
         c, raw=c["raw"].at[rows, order].set(jnp.where(d[..., None], take(c["raw"]), raw2)),
         code=c["code"].at[rows, order].set(jnp.where(d, take(c["code"]), code2)),
@@ -208,4 +209,93 @@ def _store_c(plan: _Plan, scale, j, c, res):
         c, raw_b=jnp.where(take_p[:, None], at(raw_p), c["raw_b"]),
         code_b=jnp.where(take_p, at(code_p), c["code_b"]),
         l2_b=jnp.where(take_p, at(l2_p), c["l2_b"]), steps_b=c["steps_b"] + jnp.where(spent, at(steps_p), 0),
+    )
+
+
+#: the solver backends of :func:`baselines.fit`
+BACKENDS = ("optimistix", "jaxopt")
+
+
+def residual_fn(model, u, v):
+    def fn(raw, args):
+        y, sw = args
+        f = model.evaluate(model.to_params(raw), u, v)
+        return jnp.where(sw > 0, sw * (y - f), 0.0)
+
+    return fn
+
+
+def optimistix_solve(fn, raw0, args, max_steps, rtol, atol):
+    # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    sol = optx.least_squares(fn, solver, raw0, args=args, max_steps=max_steps, throw=False)
+    r = optx.RESULTS
+    max_steps_hit = (sol.result == r.max_steps_reached) | (sol.result == r.nonlinear_max_steps_reached)
+    code = jnp.where(
+        sol.result == r.successful,
+        RESULTS.OK,
+        jnp.where(
+            max_steps_hit, RESULTS.MAX_STEPS,
+            jnp.where(sol.result == r.nonfinite, RESULTS.NONFINITE, RESULTS.FAILED),
+        ),
+    )
+    return sol.value, code.astype(jnp.int32), sol.stats["num_steps"].astype(jnp.int32)
+
+
+def residuals(name: str, raw, u, v, values, weights_c2):
+    """The residual vector ``sqrt(w_i cos^2) (b_i - f_i)`` of one lane at unconstrained ``raw`` (for other solvers)."""
+    model = get_model(name)
+    return residual_fn(model, u, v)(raw, (values, jnp.sqrt(weights_c2)))
+
+
+def _at(a, idx):
+    """``a[b, idx[b]]`` for every lane ``b``: ``a`` is ``(B, S, ...)``, ``idx`` is ``(B,)``."""
+    return jnp.take_along_axis(a, idx.reshape(idx.shape + (1,) * (a.ndim - 1)), axis=1)[:, 0]
+
+
+def _pick(score_l2, code):
+    """Index of the best start per lane: converged and finite first, then any finite one."""
+    conv = jnp.where(code == RESULTS.OK, score_l2, jnp.inf)
+    any_conv = jnp.any(jnp.isfinite(conv), axis=-1)
+    return jnp.where(any_conv, jnp.argmin(conv, axis=-1), jnp.argmin(score_l2, axis=-1))
+
+
+# a kept start that ran out of steps with parameters close to their range limits (in the unit
+# coordinate sin^2: one candidate per tolerance) is put on them and gets `limit_steps` more steps, up to
+# _LIMIT_ROUNDS times; _LIMIT_TOL flags the parameters reported as on a limit
+_LIMIT_TOLS = (1e-2, 1e-1)
+_LIMIT_TOL = _LIMIT_TOLS[0]
+_LIMIT_ROUNDS = 2
+
+
+def prepare_lanes(model, u, v, y, wl, wc2, key, raw0, n_starts):
+    """What both kernels solve with: ``(sw, scale, raw0)``, the residuals' square-root weights ``sw (B, n)``
+    (``sqrt(w cos^2 / sum w)`` of equation (11)) divided by the data's own L2 ``scale (B, 1)`` (the L2 of
+    ``f = 0``; 1 where that is 0), so that the solver's tolerances are relative, and the starts ``raw0 (B, S, P)``
+    (``n_starts`` made by :func:`baselines._starts.starts` when ``raw0`` is None)."""
+    den = jnp.sum(wl, axis=-1, keepdims=True)
+    sw = jnp.sqrt(wc2 / jnp.where(den > 0, den, 1.0))
+    scale = jnp.sqrt(jnp.sum(sw * sw * y * y, axis=-1, keepdims=True))
+    scale = jnp.where(scale > 0, scale, 1.0)
+    if raw0 is None:
+        raw0 = make_starts(model, u, v, y, wc2, key, n_starts)
+    return sw / scale, scale, raw0
+
+
+def finish(model, wc2, raw0, c):
+    """The kept start's result (its L2 and code written back into the per-start arrays): a dict of ``(B, ...)``
+    arrays, the fields of :class:`baselines.BaselineFit` but ``params``, ``l2`` and ``success`` (which
+    :func:`baselines.fit` computes from ``raw``, differentiably)."""
+    best, raw_b, code_b, l2_b, steps_b = (c[k] for k in ("best", "raw_b", "code_b", "l2_b", "steps_b"))
+    rows = jnp.arange(raw_b.shape[0])
+    sl2 = c["sl2"].at[rows, best].set(l2_b)
+    code = c["code"].at[rows, best].set(code_b)
+    ok = jnp.all(jnp.isfinite(raw_b), axis=-1)
+    raw_b = jnp.where(ok[:, None], raw_b, raw0[:, 0])  # never hand back NaN parameters
+    code_b = jnp.where(ok, code_b, RESULTS.NONFINITE)
+    no_samples = jnp.sum(wc2 > 0, axis=-1) == 0
+    code_b = jnp.where(no_samples, RESULTS.NO_SAMPLES, code_b).astype(jnp.int32)
+    return dict(
+        raw=raw_b, status=code_b, steps=steps_b, start_l2=sl2, start_status=code.astype(jnp.int32),
+        best_start=best.astype(jnp.int32), at_limit=model.snap_to_limits(raw_b, _LIMIT_TOL)[1],
     )

@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from polyjax import DataFormatError, InputError, UnknownNameError
-from polyjax._config import data_file
+from polyjax.internal import data_file
 
 _FILES = {"sgd": "published_fits/sgd_merl.csv", "abc": "published_fits/abc_merl.csv"}
 _SGD_COLS = ("rhoD", "rhoS", "alpha", "p", "f0", "f1", "kap", "lambda", "c", "k", "theta0")

@@ -1,4 +1,5 @@
-"""The result of :func:`baselines.fit`: :class:`BaselineFit`, evaluable at any directions."""
+"""The result of :func:`baselines.fit`: :class:`BaselineFit`, evaluable at any directions, and the material of one
+fitted lane of a standard model (:func:`standard_material`)."""
 
 from __future__ import annotations
 
@@ -7,25 +8,24 @@ import functools
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from polyjax import InputError, Result, safe_normalize
+from polyjax import InputError, safe_normalize
 
-from ._common import BaselineModel
-from ._registry import get_model
-
-#: The result codes of a baseline fit: an alias of :class:`polyjax.Result`, shared with every fitter.
-BaselineStatus = Result
+from ._models.common import BaselineModel
+from ._models.materials import channel_parameters
+from ._models.registry import get_model
 
 
 class BaselineFit(eqx.Module):
-    """Result of :func:`baselines.fit` for a batch of lanes (materials, channels).
+    """The result of :func:`baselines.fit` for a batch of lanes (materials, channels).
 
     Attributes:
         params: ``(*batch, P)`` constrained (physical) parameters, see ``param_names``.
         raw: ``(*batch, P)`` the unconstrained parameters the optimiser worked on.
         l2: ``(*batch,)`` L2 of equation (11) (:func:`polyjax.l2_error`) of the kept start.
-        status: ``(*batch,)`` :class:`polyjax.Result` code of the kept start.
+        status: ``(*batch,)`` :class:`polyjax.RESULTS` code of the kept start.
         steps: ``(*batch,)`` solver steps of the kept start (both stages).
         success: ``(*batch,)`` True when the kept start converged to a finite L2.
         start_l2: ``(*batch, S)`` final L2 of every start (``inf`` for non-finite ones).
@@ -67,8 +67,6 @@ class BaselineFit(eqx.Module):
     def material(self, index=()) -> dict:
         """The fitted material ``index`` of a standard model, named as its specification names it
         (:func:`baselines.standard_material`; what :func:`polyjax.export.gltf` and ``mitsuba_xml`` take)."""
-        from ._standard import standard_material
-
         return standard_material(self, index)
 
     def __getitem__(self, index) -> "BaselineFit":
@@ -110,3 +108,34 @@ def _evaluate_batch(name, params, u, v):
     flat = params.reshape(-1, params.shape[-1])
     out = jax.vmap(lambda p: jnp.where(ok_u & ok_v, model.evaluate(p, u, v), 0.0))(flat)
     return out.reshape(params.shape[:-1] + shape[:-1])
+
+
+def standard_material(fit, index=()) -> dict:
+    """The material of one fitted material lane of a standard model, named as its specification names it.
+
+    Args:
+        fit: a :class:`baselines.BaselineFit` of a standard model (:data:`baselines.STANDARD_MODELS`), params
+            ``(..., 3, P)``.
+        index: the material's index in the batch axes before the channel axis (``()`` for one material).
+
+    Returns:
+        ``{"model": <name>, <parameter>: float or [r, g, b], ...}``, e.g. for ``gltf-pbr``
+        ``{"model": "gltf-pbr", "baseColorFactor": [r, g, b], "metallicFactor": m, "roughnessFactor": r}``;
+        ready for :func:`polyjax.export.gltf` and :func:`polyjax.export.mitsuba_xml`.
+
+    Raises:
+        InputError: ``fit`` is not a fit of a standard model, or ``index`` does not select one material.
+    """
+    name = getattr(fit, "name", None)
+    model = get_model(name) if isinstance(name, str) else None
+    if model is None or model.to_material is None:
+        raise InputError(f"fit: expected a baselines fit of a standard material model, found {name!r}")
+    index = index if isinstance(index, tuple) else (index,)
+    params = np.asarray(fit.params)
+    try:
+        p = params[index]
+    except IndexError as err:
+        raise InputError(f"index: {index} is not a material of the fit's batch shape {params.shape[:-2]}") from err
+    channel_parameters(p, model.n_params, f"index: expected one material's (3, {model.n_params}) parameters",
+                       f"; the fit's batch shape is {params.shape[:-1]}")
+    return model.to_material(p)

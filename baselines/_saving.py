@@ -8,12 +8,12 @@ entry point group ``polyjax.models`` (``pyproject.toml``) and registered when :m
 
 from __future__ import annotations
 
-from polyjax import register_model_kind
-from polyjax._kinds import module_kind
+from polyjax import RESULTS
+from polyjax.internal import module_kind, register_model_kind
 
 from ._fit import fit
-from ._registry import MODELS
-from ._result import BaselineFit, BaselineStatus
+from ._models.registry import MODELS
+from ._result import BaselineFit
 
 
 def _fit(name: str, data, *, cutoff_deg: float | None = 80.0, **options) -> BaselineFit:
@@ -21,5 +21,5 @@ def _fit(name: str, data, *, cutoff_deg: float | None = 80.0, **options) -> Base
 
 
 KIND = register_model_kind(module_kind(
-    BaselineFit, "baselines.BaselineFit", models=MODELS, fit=_fit, status_names=tuple(s.name for s in BaselineStatus),
+    BaselineFit, "baselines.BaselineFit", models=MODELS, fit=_fit, status_names=tuple(s.name for s in RESULTS),
 ))

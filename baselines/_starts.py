@@ -11,11 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-import polyjax as pj
 from polyjax import InputError
+from polyjax.internal import prepare_inputs
 
-from ._common import BaselineModel
-from ._registry import get_model
+from ._models.common import BaselineModel
+from ._models.registry import get_model
 
 
 def _linear_seed(cols, y, wc2):
@@ -76,7 +76,7 @@ def initial_guesses(
     check_n_starts(n_starts)
     if model.linear:
         raise InputError(f"{model.name} is linear and fitted in closed form: it has no starting points")
-    inp, cutoff = pj.prepare_inputs("initial_guesses", u, v, values, weights, mask, cutoff_deg=cutoff_deg)
+    inp, cutoff = prepare_inputs("initial_guesses", u, v, values, weights, mask, cutoff_deg=cutoff_deg)
     _, wc2 = inp.objective_weights(cutoff)
     key = jax.random.PRNGKey(0) if key is None else key
     raw = _starts_kernel(model.name, inp.u, inp.v, inp.values, wc2, key, int(n_starts))

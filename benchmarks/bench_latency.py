@@ -60,7 +60,7 @@ if mode == "scipy":
     from scipy.optimize import least_squares
     u, v = jax.numpy.asarray(data.u), jax.numpy.asarray(data.v)
     starts = np.load(sys.argv[4])["starts"]  # the 16 starts baselines.fit uses, computed by the parent process
-    w, wc2 = pj.fit_weights(u, v, data.weights, None, 80.0)
+    w, wc2 = pj.internal.fit_weights(u, v, data.weights, None, 80.0)
     sw2 = wc2 / jax.numpy.sum(w)
     y = jax.numpy.asarray(data.values)
     fn = jax.jit(lambda r, yb: bl.residuals(name, r, u, v, yb, sw2))
@@ -82,7 +82,7 @@ if mode == "scipy":
 else:
     if mode == "staged":  # the previous kernel: one traced solver loop per stage
         import baselines._fit as F
-        from baselines._staged import staged_kernel
+        from baselines._jaxopt import staged_kernel
         F.fit_kernel = lambda *a, **k: staged_kernel(*a, backend="optimistix", **k)
     t1 = time.perf_counter()
     f = bl.fit(name, data, n_starts=16)

@@ -5,7 +5,7 @@ Every row is a fresh Python process timed from outside (wall clock, ``subprocess
 * ``import polyjax`` alone (the floor under every command);
 * ``polyjax fit`` (CUReT sample 25 when ``POLYJAX_DATA`` is set, else the synthetic default; Lafortune, p = 7)
   with an empty cache folder (cold: compiles, writes the compilation cache and the fit's executable,
-  ``polyjax/_aot.py``), then again with the same folder (warm: loads the executable: no tracing, lowering or
+  ``polyjax/_fit/saved.py``), then again with the same folder (warm: loads the executable: no tracing, lowering or
   compiling), with the same folder but ``POLYJAX_SAVED_PROGRAMS=off`` (warm from JAX's compilation cache alone:
   every program traced and lowered, then loaded), and with ``--no-cache``;
 * the number of files in the cache folder (recursively) after each run: a warm run that compiled anything would

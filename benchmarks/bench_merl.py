@@ -4,18 +4,18 @@ Two sources per material: a MERL ``.binary`` file of the real layout (written on
 into a temporary folder) and the neural-BRDF networks evaluated on the MERL grid. The physical floor
 is the time to stream the same 34,992,012 bytes from memory (a ``numpy`` copy of an in-memory buffer),
 measured in the same run. Target: load + fit (``.binary``) at most 15x that floor. The fit of concrete data is
-streamed (``polyjax/_stream.py``: the design is built in row blocks and never held; what depends on the MERL grid
+streamed (``polyjax/_fit/stream.py``: the design is built in row blocks and never held; what depends on the MERL grid
 alone, the PCA and CholeskyQR2 of the weighted design, is computed once per process, so a later material costs one
 pass over its values, two when the refining pass is needed).
 
 The first material in a process also pays for everything a process does once per grid: the grid's directions and
 weights (``merl_grid``), their device copies, and the fit's geometry. It is timed by forgetting all of that before
 each timed call (every per-process memo: the grid caches of ``polyjax/data/_merl.py`` and its reused read buffer,
-the remembered unit directions of ``polyjax/_inputs.py`` and the geometry of ``polyjax/_fit.py``); compiled
+the remembered unit directions and geometry of ``polyjax/_cache/memo.py``); compiled
 programs stay compiled (compilation is ``bench_latency.py``'s subject). The loader makes the grid in a thread while
 the file is read and gathered, its directions in two threads (the machine's two cores). Two first materials: cold,
 with no geometry kept on disk (it is computed, then written), and warm, with the geometry an earlier process kept
-beside the compilation cache (``polyjax/_geometry_store.py``: read and checked; its per-sample rows are made inside
+beside the compilation cache (``polyjax/_cache/geometry.py``: read and checked; its per-sample rows are made inside
 the fit's program, which then checks the samples used and their total weight against the kept ones before its fit
 is used). This run's compilation cache, and so that geometry, is in a temporary folder. The dense fit (the path a
 traced, differentiable call takes; here the same call under ``jax.jit``) is timed beside them too, and the two L2
@@ -36,7 +36,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import polyjax as pj  # noqa: E402
-from polyjax import _fit, _inputs  # noqa: E402
+from polyjax._cache.compilation import memo  # noqa: E402
 from polyjax.data import _merl  # noqa: E402
 
 
@@ -55,8 +55,7 @@ def forget_grid_work():
     for cached in (_merl.merl_grid, _merl._device_grid, _merl._above_index):
         cached.cache_clear()
     _merl._SCRATCH.clear()
-    _inputs._UNIT_MEMO.clear()
-    _fit._GEOMETRY_MEMO.clear()
+    memo.forget_all()
 
 
 def grid_work():  # the part of a first material's time that is the grid's directions and weights on the device

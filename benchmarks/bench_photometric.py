@@ -30,7 +30,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 import polyjax as pj  # noqa: E402
-from polyjax.render._photo_cli import DEFAULTS  # noqa: E402
+from polyjax.cli._photos import DEFAULTS  # noqa: E402
 
 K_NEAREST = 8
 POLYNOMIALS = [  # (label, variables, degree, options)

@@ -42,7 +42,7 @@ def measure(d: pj.Measurements, variables: str) -> dict:
             row[f"cond_{basis}"] = float(np.max(np.asarray(m64.condition)[i]))
             r = np.asarray(m32.l2)[i] / np.asarray(m64.l2)[i]
             row[f"ratio_{basis}"] = float(r[np.argmax(np.abs(np.log(r)))])
-            row[f"rd32_{basis}"] = int(np.sum(np.asarray(m32.status)[i] != pj.FitStatus.OK))
+            row[f"rd32_{basis}"] = int(np.sum(np.asarray(m32.status)[i] != pj.RESULTS.OK))
         rows.append(row)
     return rows
 

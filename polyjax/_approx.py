@@ -22,9 +22,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._design import fitted_design
-from ._geometry import safe_normalize
-from ._linalg import svd
+from ._directions import safe_normalize
 from ._metrics import fit_weights
+from ._solve.linalg import svd
 from ._variables import get_variables
 
 

@@ -1,4 +1,7 @@
-"""Host data onto the device without a compiled program.
+"""Arrays: whether values are traced, and host data onto the device without a compiled program.
+
+:func:`is_traced` is the one test of "is this inside ``jit``/``grad``/``vmap``?" (a tracer among the leaves); every
+eager-only check (a Python error before any work, a table look-up, a memo) asks it.
 
 In this JAX, ``jnp.asarray`` of a numpy array (or a list) runs a small compiled program (``jit(stage)``, or
 ``jit(convert_element_type)`` with a ``dtype``) and compiles it anew for every new shape: ~20 ms each, most of the
@@ -12,6 +15,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+
+def is_traced(*xs) -> bool:
+    """True when a leaf of any argument is a JAX tracer (``jit``/``grad``/``vmap`` hand tracers in)."""
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(xs))
+
+
+def is_concrete(*xs) -> bool:
+    """True when no leaf of any argument is a JAX tracer: ``not is_traced(*xs)``."""
+    return not is_traced(*xs)
 
 
 def device_array(a, dtype=None) -> jax.Array:
@@ -32,6 +45,6 @@ def cast_concrete(x, dtype) -> jax.Array:
     compiled program); tracers and sharded arrays are cast on the device."""
     if x.dtype == dtype:
         return x
-    if isinstance(x, jax.core.Tracer) or len(getattr(x, "devices", lambda: ())()) != 1:
+    if is_traced(x) or len(getattr(x, "devices", lambda: ())()) != 1:
         return x.astype(dtype)
     return jax.device_put(np.asarray(x).astype(dtype), next(iter(x.devices())))

@@ -32,7 +32,6 @@ inputs (``jit``, ``grad``, ``vmap``) pass through and are never copied to the ho
 from __future__ import annotations
 
 import functools
-import weakref
 
 import equinox as eqx
 import jax
@@ -40,8 +39,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from ._arrays import is_concrete
+from ._cache import memo
+from ._directions import safe_normalize
 from ._errors import InputError
-from ._geometry import safe_normalize
 from ._measurements import Measurements
 from ._metrics import fit_weights
 
@@ -102,11 +103,6 @@ class PreparedInputs(eqx.Module):
             r = self.values.shape[0] // self.groups
             u, v = jnp.repeat(u, r, axis=0), jnp.repeat(v, r, axis=0)
         return fit_weights(u, v, w, m, cutoff_deg)
-
-
-def is_concrete(*xs) -> bool:
-    """True when no argument is a JAX tracer (``jit``/``grad``/``vmap`` hand tracers in)."""
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(xs))
 
 
 def unpack(caller: str, u, v, values, weights, mask):
@@ -211,42 +207,25 @@ def _normalize_pair(u, v):
     return u, v, ok_u & ok_v
 
 
-_UNIT_MEMO: dict = {}
-
-
 def _unit_directions(u, v):
-    """Unit ``u``, ``v`` and where both have a direction. The last concrete pair is remembered by identity: the
-    loaders hand out the same device arrays for a shared grid (every MERL ``.binary`` file), whose million
-    directions are then normalised once, not once per fit."""
+    """Unit ``u``, ``v`` and where both have a direction. The last concrete pair is remembered by identity
+    (:mod:`polyjax._cache.memo`): the loaders hand out the same device arrays for a shared grid (every MERL
+    ``.binary`` file), whose million directions are then normalised once, not once per fit."""
     if not is_concrete(u, v):
         return _normalize_pair(u, v)
-    if _known_pair(u, v):
-        return _UNIT_MEMO["pair"][2]
+    known = memo.known_unit_directions(u, v)
+    if known is not None:
+        return known
     out = _normalize_pair(u, v)
     if not is_concrete(out):  # concrete arrays closed over inside a trace give traced results: never kept
         return out
-    try:
-        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), out)
-    except TypeError:  # an array type without weak references: not remembered
-        _UNIT_MEMO.pop("pair", None)
+    memo.remember_unit_directions(u, v, out)
     return out
-
-
-def remember_unit_directions(u, v, valid) -> None:
-    """Record that the concrete device arrays ``u``, ``v`` ``(n, 3)`` are unit vectors already (``valid (n,)``
-    where both have a direction), as :func:`_unit_directions` would return them: a loader that builds a grid of
-    directions from angles (unit to rounding; the MERL grid) calls it, so that the first fit on the grid skips
-    the normalising pass over its million directions. Replaces the pair remembered before."""
-    try:
-        _UNIT_MEMO["pair"] = (weakref.ref(u), weakref.ref(v), (u, v, valid))
-    except TypeError:  # an array type without weak references: not remembered
-        _UNIT_MEMO.pop("pair", None)
 
 
 def _known_pair(u, v) -> bool:
     """Whether ``u``, ``v`` are the pair :func:`_unit_directions` remembers (already checked and normalised)."""
-    hit = _UNIT_MEMO.get("pair")
-    return hit is not None and hit[0]() is u and hit[1]() is v
+    return memo.known_unit_directions(u, v) is not None
 
 
 @functools.partial(jax.jit, static_argnames=("nonfinite", "shared"))

@@ -1,4 +1,20 @@
-"""Saving and loading fitted models (``.npz`` or ``.json``), bit-exact.
+"""Saved models: the kinds of fitted model polyjax knows, and saving and loading them (``.npz`` or ``.json``).
+
+**Kinds.** Kinds of fitted model that :func:`polyjax.save_model`, :func:`polyjax.load_model` and ``polyjax fit --model``
+know, found without polyjax importing the packages that define them.
+
+A kind is a :class:`ModelKind` record: the name stored in saved files, the model's class, functions to and
+from plain arrays, and optionally the model families it can fit (``polyjax fit --model <name>``). polyjax
+registers its own :class:`polyjax.PolynomialBRDF`; another package provides kinds through the entry point
+group ``polyjax.models`` of its metadata (``pyproject.toml``)::
+
+    [project.entry-points."polyjax.models"]
+    "mypackage.MyFit" = "mypackage._saving:KIND"
+
+or calls :func:`register_model_kind` on import. Entry points are loaded only when a kind is asked for that is
+not registered yet.
+
+**Files.** Saving and loading fitted models (``.npz`` or ``.json``), bit-exact.
 
 File format (version 2): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
 "static": {...}}`` and named arrays. In ``.npz`` the header is the string array ``__meta__`` and every
@@ -12,16 +28,179 @@ Version 1 files (``"format": "polyjax.PolynomialBRDF"``, static fields at the to
 
 from __future__ import annotations
 
+import dataclasses
+import importlib.util
 import json
 import os
+import warnings
 import zipfile
+from collections.abc import Callable
+from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from ._arrays import device_array
 from ._errors import DataFormatError, DataNotFoundError, InputError, UnknownNameError
-from ._kinds import kind_named, kind_of, module_kind, register_model_kind
-from ._model import FitStatus, PolynomialBRDF
+from ._model import RESULTS, PolynomialBRDF
+
+ENTRY_POINT_GROUP = "polyjax.models"
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelKind:
+    """How to store (and optionally fit) one class of fitted model.
+
+    Attributes:
+        kind: the name written into saved files (``"<package>.<class>"`` by convention); never change it.
+        type: the class of the fitted models.
+        to_arrays: ``model -> (static, arrays)``: a JSON-serialisable dict and a dict of numpy arrays.
+        from_arrays: ``(static, arrays) -> model``, the inverse (bit-exact).
+        models: names of the model families ``fit`` accepts (``polyjax fit --model <name>``).
+        fit: ``(name, measurements, **options) -> model``; options the command line passes:
+            ``cutoff_deg``.
+        status_names: names of the integer codes in the model's ``status`` field, for reports.
+    """
+
+    kind: str
+    type: type
+    to_arrays: Callable[[Any], tuple[dict, dict]]
+    from_arrays: Callable[[dict, dict], Any]
+    models: tuple[str, ...] = ()
+    fit: Callable[..., Any] | None = None
+    status_names: tuple[str, ...] = ()
+
+
+def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, status_names=()) -> ModelKind:
+    """A :class:`ModelKind` for an ``equinox.Module`` class: its array fields are stored as arrays, its
+    static fields (which must be JSON values: str, int, float, bool) in ``static``, all by field name."""
+    fields = dataclasses.fields(cls)
+    static = tuple(f.name for f in fields if f.metadata.get("static", False))
+    arrays = tuple(f.name for f in fields if not f.metadata.get("static", False))
+
+    def to_arrays(model):
+        return {k: getattr(model, k) for k in static}, {k: np.asarray(getattr(model, k)) for k in arrays}
+
+    # static fields with a default (added after files were written, e.g. PolynomialBRDF.link) may be absent
+    defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
+
+    def from_arrays(meta, arrs):
+        missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta and k not in defaults]
+        if missing:
+            raise KeyError(f"missing fields {missing}")
+        return cls(**{k: device_array(arrs[k]) for k in arrays}, **{k: meta.get(k, defaults.get(k)) for k in static})
+
+    return ModelKind(kind=kind, type=cls, to_arrays=to_arrays, from_arrays=from_arrays, models=tuple(models), fit=fit,
+                     status_names=tuple(status_names))
+
+
+_REGISTRY: dict[str, ModelKind] = {}
+_LOADED_ENTRY_POINTS: set[str] = set()
+#: why an entry point (by name, e.g. "baselines.BaselineFit") failed to load, for the errors that need its kind
+_LOAD_FAILURES: dict[str, str] = {}
+
+
+def register_model_kind(kind: ModelKind) -> ModelKind:
+    """Register ``kind`` (replacing a kind of the same name); returns it."""
+    if not isinstance(kind, ModelKind):
+        raise TypeError(f"kind: expected a polyjax.ModelKind, found {type(kind).__name__}")
+    _REGISTRY[kind.kind] = kind
+    return kind
+
+
+def _load_entry_points() -> None:
+    """Load every entry point of the group not loaded yet (each registers the kind it names)."""
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        key = f"{ep.name}={ep.value}"
+        if key in _LOADED_ENTRY_POINTS:
+            continue
+        _LOADED_ENTRY_POINTS.add(key)
+        # checked before loading: an editable install's import hook would find the provider's module below a
+        # foreign package of the same name, and load it as if it belonged there
+        shadow = _shadowing_package(ep.value)
+        try:
+            if shadow:
+                raise ImportError(shadow)
+            obj = ep.load()
+        except Exception as e:  # noqa: BLE001  (a broken provider must not break the others)
+            _LOAD_FAILURES[ep.name] = shadow or f"its entry point {ep.value!r} failed to load: {e}"
+            warnings.warn(f"entry point {ep.name!r} = {ep.value!r} of group {ENTRY_POINT_GROUP!r} failed to load: "
+                          f"{shadow or e}", stacklevel=3)
+            continue
+        if isinstance(obj, ModelKind):
+            _REGISTRY.setdefault(obj.kind, obj)
+
+
+def _shadowing_package(value: str) -> str | None:
+    """When the top-level package of entry point ``value`` (e.g. ``baselines`` of ``baselines._saving:KIND``) is
+    importable but is not the one that declares it (another package of that name, e.g. an unrelated ``baselines``
+    from the package index, found first on ``sys.path``): a message saying so, naming where it was found."""
+    module = value.split(":")[0]
+    top = module.split(".")[0]
+    if module == top:  # the entry point names a top-level module itself: nothing can stand in front of a part of it
+        return None
+    try:
+        spec = importlib.util.find_spec(top)
+        own = importlib.util.find_spec(module) if spec is not None else None
+    except (ImportError, ValueError):
+        return None
+    inside = own is not None and any(str(own.origin or "").startswith(str(loc))
+                                     for loc in (spec.submodule_search_locations or []))
+    if spec is None or inside:
+        return None
+    where = spec.origin or ", ".join(spec.submodule_search_locations or [])
+    return (f"the package {top!r} found at {where} is not polyjax's {top!r} (it has no {module!r}): another package "
+            f"of that name shadows it; uninstall it (pip uninstall {top}) or put polyjax's first on sys.path")
+
+
+def model_kinds() -> dict[str, ModelKind]:
+    """Every known kind (registered, and those of installed entry points), by name."""
+    _load_entry_points()
+    return dict(_REGISTRY)
+
+
+def kind_named(name: str) -> ModelKind:
+    """The kind stored in a file under ``name``; UnknownNameError when no installed package provides it."""
+    if name not in _REGISTRY:
+        _load_entry_points()
+    if name not in _REGISTRY and name in _LOAD_FAILURES:
+        raise UnknownNameError(f"model kind {name!r}: {_LOAD_FAILURES[name]}")
+    if name not in _REGISTRY:
+        raise UnknownNameError(
+            f"model kind {name!r}: not provided by any installed package (known: {sorted(_REGISTRY)}); install the "
+            f"package that defines it (it declares the entry point group {ENTRY_POINT_GROUP!r})"
+        )
+    return _REGISTRY[name]
+
+
+def kind_of(model) -> ModelKind:
+    """The kind of a fitted model object (by its class, most specific first)."""
+    for attempt in range(2):
+        for cls in type(model).__mro__:
+            for k in _REGISTRY.values():
+                if k.type is cls:
+                    return k
+        if attempt == 0:
+            _load_entry_points()
+    raise UnknownNameError(
+        f"model: no saved-model kind for {type(model).__module__}.{type(model).__name__} (known: "
+        f"{sorted(k.type.__name__ for k in _REGISTRY.values())}); register one with polyjax.register_model_kind"
+    )
+
+
+def fitter_for(name: str) -> tuple[ModelKind, str]:
+    """The kind whose ``models`` include ``name`` (case, ``_`` and space insensitive), and the name as it spells it."""
+    key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
+    kinds = model_kinds()
+    for k in kinds.values():
+        for m in k.models:
+            if m.lower() == key and k.fit is not None:
+                return k, m
+    known = sorted(m for k in kinds.values() if k.fit is not None for m in k.models)
+    failed = "".join(f"; {kind} unavailable: {why}" for kind, why in _LOAD_FAILURES.items())
+    raise UnknownNameError(f"--model {name!r}: expected 'polynomial' or one of {known}{failed}")
+
 
 FORMAT = "polyjax.model"
 VERSION = 2
@@ -30,7 +209,7 @@ FORMAT_V1 = "polyjax.PolynomialBRDF"
 _STATIC_V1 = ("variables", "basis", "interactions", "max_degree")
 
 POLYNOMIAL_KIND = register_model_kind(module_kind(
-    PolynomialBRDF, "polyjax.PolynomialBRDF", status_names=tuple(s.name for s in FitStatus),
+    PolynomialBRDF, "polyjax.PolynomialBRDF", status_names=tuple(s.name for s in RESULTS),
 ))
 
 

@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._directions import cos_theta, cutoff_mask
 from ._errors import InputError
-from ._geometry import cos_theta, cutoff_mask
 
 
 def fit_weights(

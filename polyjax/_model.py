@@ -9,15 +9,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
+from numpy.polynomial import legendre, polynomial
 
+from ._arrays import is_traced
 from ._basis import design_matrix, exponents, n_terms
+from ._directions import safe_normalize
 from ._errors import InputError
-from ._geometry import safe_normalize
-from ._results import Result
+from ._results import RESULTS
 from ._variables import get_variables
-
-#: The result codes of a fit (an alias of :class:`polyjax.Result`, shared with every fitter).
-FitStatus = Result
 
 
 class PolynomialBRDF(eqx.Module):
@@ -38,7 +37,7 @@ class PolynomialBRDF(eqx.Module):
         l2: ``(*batch,)`` L2 error (equation (11)) on the fitted data.
         rank, condition: numerical rank and condition number of the weighted design.
         n_used: samples that entered the fit.
-        status: :class:`polyjax.Result` codes (``RESULTS`` has their messages).
+        status: :class:`polyjax.RESULTS` codes (``RESULTS.<CODE>.message`` says what each means).
         variables, basis, interactions, max_degree: static description of the model family.
         link, eps: ``"identity"`` (equation (3) itself, the default) or ``"log"``: the model is then
             ``f = exp(poly) - eps``, the polynomial fitted in log space (:func:`polyjax.fit_log_polynomial`).
@@ -59,7 +58,7 @@ class PolynomialBRDF(eqx.Module):
     basis: str = eqx.field(static=True)
     interactions: bool = eqx.field(static=True)
     max_degree: int = eqx.field(static=True)
-    link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._logfit)
+    link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._fit.log)
     eps: float = eqx.field(static=True, default=0.0)
 
     @property
@@ -74,14 +73,14 @@ class PolynomialBRDF(eqx.Module):
     def n_params(self) -> Int[Array, "*batch"]:
         """Number of parameters of each lane: ``k p + 1`` (or ``C(k+p, p)`` with interactions)."""
         table = np.array([n_terms(self.k, p, self.interactions) for p in range(self.max_degree + 1)])
-        if not isinstance(self.degree, jax.core.Tracer):  # no compiled program for a table look-up
+        if not is_traced(self.degree):  # no compiled program for a table look-up
             return table[np.asarray(self.degree)]
         return jnp.asarray(table)[self.degree]
 
     @property
     def ok(self) -> Array:
         """True for lanes whose fit has full rank and samples."""
-        return self.status == Result.OK
+        return self.status == RESULTS.OK
 
     def __getitem__(self, index) -> "PolynomialBRDF":
         """Select lanes of the batch (``model[3]``, ``model[:, 0]``)."""
@@ -129,8 +128,6 @@ class PolynomialBRDF(eqx.Module):
         """
         if self.interactions:
             raise ValueError("paper_coefficients: only defined for the model of equation (3) (interactions=False)")
-        from numpy.polynomial import legendre, polynomial
-
         k, p = self.k, self.max_degree
         coef = np.asarray(self.coefficients, dtype=np.float64).reshape(-1, k * p + 1)
         centre = np.asarray(self.centre, dtype=np.float64).reshape(-1, k)
@@ -162,7 +159,7 @@ def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:
     return design_matrix(z, degree, "monomial", False) @ jnp.asarray(beta)
 
 
-__all__ = ["FitStatus", "PolynomialBRDF", "evaluate_paper_form", "exponents"]
+__all__ = ["PolynomialBRDF", "evaluate_paper_form", "exponents"]
 
 
 @jax.jit
@@ -183,7 +180,7 @@ def _evaluate(model: PolynomialBRDF, u, v):
         flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
         out = jax.vmap(lambda p: model._lane(p, x))(flat)
         out = out.reshape(model.batch_shape + out.shape[1:])
-    if model.link == "log":  # f = exp(poly) - eps (polyjax._logfit)
+    if model.link == "log":  # f = exp(poly) - eps (polyjax._fit.log)
         out = jnp.exp(out) - model.eps
     return jnp.where(above, out, 0.0)
 

@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._linalg import eigh
-from ._threads import one_lapack_thread
+from ._solve.linalg import eigh
+from ._solve.threads import one_lapack_thread
 
 
 class PCA(eqx.Module):
@@ -51,7 +51,7 @@ def fit_pca(x: Float[Array, "n k"], keep: Float[Array, " n"] | None = None) -> P
         :class:`PCA`. With no kept sample the mean is 0 and the rotation the identity.
 
     Differentiable (``jvp``, ``grad``, ``jacfwd``, ``jacrev``, ``vmap`` of them) with respect to ``x``
-    through :func:`polyjax._linalg.eigh`'s rule: ``d lambda_i = r_i^T dC r_i`` and
+    through :func:`polyjax._solve.linalg.eigh`'s rule: ``d lambda_i = r_i^T dC r_i`` and
     ``dr_i = sum_{j != i} r_j (r_j^T dC r_i) / (lambda_i - lambda_j)`` for the covariance ``C``; the sort and
     the sign rule are piecewise constant. ``keep`` is a 0/1 selection and has no derivative. Tied
     eigenvalues (within ``sqrt(eps)`` of the largest; e.g. two variables of equal variance and no

@@ -1,38 +1,36 @@
-"""One result code for every fitter (polynomial, Zernike, nonlinear baselines).
+"""One result code for every fitter (polynomial, Zernike, nonlinear baselines): :class:`RESULTS`.
 
-:data:`RESULTS` is an :class:`equinox.Enumeration` with a message per code; :class:`Result` is the same codes as
-an :class:`enum.IntEnum`, for the ``int32`` ``status`` arrays the fits return (``status == Result.OK``). A code
-means the same thing in every fit. :func:`raise_on_status` is the ``throw=`` of every fitter.
+The ``status`` arrays every fit returns hold these codes as ``int32`` (``status == RESULTS.OK``); a code means the
+same thing in every fit, and ``RESULTS.<CODE>.message`` says what. :func:`raise_on_status` is the ``throw=`` of
+every fitter. The names of earlier releases (``Result``, ``FitStatus``, ``BaselineStatus`` for the enumeration,
+``NONFINITE_VALUES`` for ``NONFINITE``, the lower-case ``RESULTS.ok`` ...) still work, with a ``DeprecationWarning``.
 """
 
 from __future__ import annotations
 
 import enum
+import warnings
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._arrays import is_concrete
 from ._errors import FitError
 
-
-class RESULTS(eqx.Enumeration):
-    """Result of one fit (one lane of a batch); ``RESULTS[item]`` is its message."""
-
-    ok = "the fit succeeded"
-    rank_deficient = (
-        "the weighted design has lower numerical rank than parameters (minimum-norm solution returned)"
-    )
-    no_samples = "no sample survived the cutoff and the masks (coefficients 0, L2 inf)"
-    nonfinite = ("non-finite numbers: NaN/inf among the values fitted, or a non-finite (overflowing) L2 or solution; "
-                 "also negative or non-finite weights under jit (eagerly an InputError)")
-    max_steps = "the solver reached its step limit before its tolerances"
-    failed = "the solver failed"
+_MESSAGES = (
+    "the fit succeeded",
+    "the weighted design has lower numerical rank than parameters (minimum-norm solution returned)",
+    "no sample survived the cutoff and the masks (coefficients 0, L2 inf)",
+    "non-finite numbers: NaN/inf among the values fitted, or a non-finite (overflowing) L2 or solution; also negative "
+    "or non-finite weights under jit (eagerly an InputError)",
+    "the solver reached its step limit before its tolerances",
+    "the solver failed",
+)
 
 
-class Result(enum.IntEnum):
-    """The codes of :data:`RESULTS` as integers (the ``status`` arrays of every fit)."""
+class RESULTS(enum.IntEnum):
+    """The result of one fit (one lane of a batch), one name per code; ``RESULTS.<CODE>.message`` is its message."""
 
     OK = 0
     #: the weighted design has lower numerical rank than parameters; the minimum-norm solution is returned
@@ -42,32 +40,53 @@ class Result(enum.IntEnum):
     #: NaN/inf among the values of a lane (flagged where no Python error can be raised, e.g. under ``jit``),
     #: a non-finite L2 (values so large that the error overflows), or a solver that ended non-finite
     NONFINITE = 3
-    NONFINITE_VALUES = 3
     #: the nonlinear solver reached its step limit before its tolerances
     MAX_STEPS = 4
     #: any other solver failure
     FAILED = 5
 
+    @property
+    def message(self) -> str:
+        """What the code means."""
+        return _MESSAGES[int(self)]
 
-for _item in Result:  # the two spellings of the codes must agree
-    assert int(getattr(RESULTS, _item.name.lower().replace("_values", ""))._value) == int(_item)
+
+class _DeprecatedName:
+    """A former name of a member of :class:`RESULTS`: the member, with a ``DeprecationWarning``."""
+
+    def __init__(self, old: str, new: str):
+        self.old, self.new = old, new
+
+    def __get__(self, obj, owner):
+        warnings.warn(f"RESULTS.{self.old} is deprecated: use RESULTS.{self.new}", DeprecationWarning, stacklevel=2)
+        return owner[self.new]
+
+
+for _old, _new in [("NONFINITE_VALUES", "NONFINITE")] + [(m.name.lower(), m.name) for m in RESULTS]:
+    setattr(RESULTS, _old, _DeprecatedName(_old, _new))
+
+#: the former names of :class:`RESULTS` itself (``polyjax.Result``, ``polyjax.FitStatus``, ``baselines.BaselineStatus``)
+DEPRECATED_ALIASES = ("Result", "FitStatus", "BaselineStatus")
+
+
+def deprecated_alias(module: str, name: str):
+    """:class:`RESULTS` under a former name ``name`` of ``module``, with a ``DeprecationWarning`` (a module's
+    ``__getattr__`` calls it)."""
+    warnings.warn(f"{module}.{name} is deprecated: use polyjax.RESULTS", DeprecationWarning, stacklevel=3)
+    return RESULTS
 
 
 def message(code: int) -> str:
     """The message of a result code."""
-    return RESULTS[getattr(RESULTS, Result(int(code)).name.lower().replace("_values", ""))]
+    return RESULTS(int(code)).message
 
 
 _WHAT = {
-    Result.OK: "succeeded", Result.RANK_DEFICIENT: "are rank-deficient",
-    Result.NO_SAMPLES: "have no samples left to fit",
-    Result.NONFINITE: "have non-finite values, L2 or solution", Result.MAX_STEPS: "reached the step limit",
-    Result.FAILED: "failed",
+    RESULTS.OK: "succeeded", RESULTS.RANK_DEFICIENT: "are rank-deficient",
+    RESULTS.NO_SAMPLES: "have no samples left to fit",
+    RESULTS.NONFINITE: "have non-finite values, L2 or solution", RESULTS.MAX_STEPS: "reached the step limit",
+    RESULTS.FAILED: "failed",
 }
-
-
-def _is_concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
 
 
 def raise_on_status(caller: str, status, tree, describe=None):
@@ -78,13 +97,13 @@ def raise_on_status(caller: str, status, tree, describe=None):
     ``tree`` guarded by :func:`equinox.branched_error_if`, which raises at run time with the message of the first
     bad lane's code.
     """
-    if _is_concrete(status):
+    if is_concrete(status):
         st = np.asarray(status)
-        bad = np.argwhere(st != Result.OK)
+        bad = np.argwhere(st != RESULTS.OK)
         if len(bad) == 0:
             return tree
         first = tuple(int(i) for i in bad[0])
-        code = Result(int(st[first] if st.ndim else st))
+        code = RESULTS(int(st[first] if st.ndim else st))
         where = f"first at batch index {first}" if first else "the fit"
         extra = f": {describe(first)}" if describe is not None else ""
         raise FitError(
@@ -92,7 +111,7 @@ def raise_on_status(caller: str, status, tree, describe=None):
             "pass throw=False (and rank_deficient='flag') to get the result and read its status instead"
         )
     flat = jnp.ravel(status)
-    bad = flat != Result.OK
+    bad = flat != RESULTS.OK
     first_code = flat[jnp.argmax(bad)]
-    msgs = tuple(f"{caller}: a fit ended with {c.name}: {message(c)}" for c in sorted(set(Result)))
+    msgs = tuple(f"{caller}: a fit ended with {c.name}: {message(c)}" for c in sorted(set(RESULTS)))
     return eqx.branched_error_if(tree, jnp.any(bad), first_code, msgs)

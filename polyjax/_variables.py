@@ -37,10 +37,11 @@ from typing import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
+from ._directions import half_vector
 from ._errors import InputError, UnknownNameError
-from ._geometry import half_vector
 
 #: ``jax.jit`` of each variable function, made once: a set evaluated outside a trace runs as one compiled program
 _compiled = functools.lru_cache(maxsize=None)(jax.jit)
@@ -151,8 +152,6 @@ def register_variables(
         raise InputError(f"variables {name!r}: a set of that name exists (pass overwrite=True to replace it)")
     if int(k) < 1:
         raise InputError(f"k: expected a positive number of variables, found {k}")
-    import numpy as np
-
     rng = np.random.default_rng(0)
     w = rng.normal(size=(2, 8, 3))
     w[..., 2] = np.abs(w[..., 2]) + 0.1

@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 # the tests' own numpy and scipy calls (reference fits) with one BLAS thread, as polyjax's calls have by themselves
-# (polyjax/_threads.py): the two pytest-xdist workers share two cores, where OpenBLAS's busy-waiting threads starve
+# (polyjax/_solve/threads): the two pytest-xdist workers share two cores, where OpenBLAS's busy-waiting threads starve
 # each other; set before numpy loads its OpenBLAS, inherited by the workers and subprocesses (tests/test_threads.py
 # starts its processes without it)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

@@ -1,6 +1,9 @@
 """The package's shape, read statically with ``ast`` (docs/architecture.md, "Habits"): no function in ``polyjax/`` or
 ``baselines/`` longer than 80 lines unless the first paragraph of its docstring says why, in the words
-``Over 80 lines because``; ``polyjax`` never imports ``baselines``."""
+``Over 80 lines because``; ``polyjax`` never imports ``baselines``; no import circle in either package (imports
+inside functions counted); imports of the project's own modules inside functions only in the command dispatcher
+and the lazy package faces; at most 16 modules at the root of ``polyjax``; ``baselines`` imports nothing private of
+``polyjax``. Each check has a self-test that shows it can fail."""
 
 from __future__ import annotations
 
@@ -14,6 +17,11 @@ PACKAGES = ("polyjax", "baselines")
 MAX_LINES = 80
 #: the words that, in the first paragraph of a long function's docstring, say why it is long
 WHY_LONG = "Over 80 lines because"
+#: modules at the root of ``polyjax`` besides ``__init__.py`` and ``__main__.py``
+MAX_ROOT_MODULES = 16
+#: where a function may import the project's own modules: the command dispatcher (one lazy import per command) and,
+#: in every package's ``__init__.py``, the lazy face ``__getattr__``
+LOCAL_IMPORTS_ALLOWED = ("polyjax/cli/_main.py",)
 
 
 def _sources(packages=PACKAGES):
@@ -110,3 +118,201 @@ def test_long_function_check_reads_the_first_paragraph(doc, flagged):
 ])
 def test_import_scan_finds_baselines(source, package, hit):
     assert (_imports_baselines(f"{package}/m.py", source) != []) is hit
+
+
+# ---------------------------------------------------------------- the import graph: circles, local imports
+
+def module_name(rel: str) -> str:
+    """``polyjax/_fit/log.py`` -> ``polyjax._fit.log``; a package's ``__init__.py`` is the package."""
+    parts = list(Path(rel).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _resolve(module: str, is_package: bool, level: int, name: str | None) -> str:
+    """The absolute name of ``from <level dots><name> import ...`` in ``module``."""
+    if level == 0:
+        return name or ""
+    base = module.split(".") if is_package else module.split(".")[:-1]
+    base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([name] if name else []))
+
+
+def import_edges(sources: dict[str, str]) -> dict[str, set[str]]:
+    """The import graph of the modules ``sources`` (``{path: text}``): module -> the modules of ``sources`` it
+    imports, at the top or inside a function: ``import a.b`` is an edge to ``a.b``; ``from a import b`` to ``a.b`` when
+    that is a module, else to ``a``; ``importlib.import_module`` with a literal name (resolved against its
+    ``package``) too. A package's ``__init__.py`` is a node like any module (its imports are edges)."""
+    modules = {module_name(rel): rel for rel in sources}
+    edges: dict[str, set[str]] = {m: set() for m in modules}
+
+    def known(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    for mod, rel in modules.items():
+        is_package = rel.endswith("__init__.py")
+        for node in ast.walk(ast.parse(sources[rel])):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = _resolve(mod, is_package, node.level, node.module)
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            elif (isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", None)) ==
+                  "import_module" and node.args and isinstance(node.args[0], ast.Constant)):
+                name = str(node.args[0].value)
+                level = len(name) - len(name.lstrip("."))
+                targets = [_resolve(mod, is_package, level, name.lstrip(".") or None) if level else name]
+            edges[mod] |= {t for t in map(known, targets) if t is not None and t != mod}
+    return edges
+
+
+def import_circles(sources: dict[str, str]) -> list[list[str]]:
+    """Every import circle of ``sources``: the strongly connected components of :func:`import_edges` with more
+    than one module (Tarjan's algorithm), each sorted."""
+    edges = import_edges(sources)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles = []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(edges[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return circles
+
+
+def local_own_imports(rel: str, source: str, own=PACKAGES) -> list[str]:
+    """``path:line module`` of every import of the project's own modules (``own``, or relative) inside a function of
+    ``source``, but in :data:`LOCAL_IMPORTS_ALLOWED` and in a package face's ``__getattr__``."""
+    if rel in LOCAL_IMPORTS_ALLOWED:
+        return []
+    found = []
+    for func in ast.walk(ast.parse(source)):
+        if not isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        if func.name == "__getattr__" and rel.endswith("__init__.py"):
+            continue
+        for node in ast.walk(func):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                names = ["." * node.level + (node.module or "")]
+            else:
+                continue
+            found += [f"{rel}:{node.lineno} {n}" for n in names if n.startswith(".") or n.split(".")[0] in own]
+    return sorted(set(found))
+
+
+def root_modules(names) -> list[str]:
+    """The modules among the file names ``names`` of the package root, but ``__init__.py`` and ``__main__.py``."""
+    return sorted(n for n in names if n.endswith(".py") and n not in ("__init__.py", "__main__.py"))
+
+
+def private_polyjax_imports(rel: str, source: str) -> list[str]:
+    """``path:line module`` of every import of a private polyjax module in ``source`` (a module outside polyjax):
+    a module path with a part that starts with ``_`` (``polyjax._io``, ``from polyjax import _io``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+        else:
+            continue
+        found += [f"{rel}:{node.lineno} {n}" for n in names
+                  if n.split(".")[0] == "polyjax" and any(p.startswith("_") for p in n.split(".")[1:])]
+    return found
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_circle(package):
+    sources = dict(_sources((package,)))
+    assert import_circles(sources) == []
+    edges = import_edges(sources)  # the graph is read (not vacuous): the face imports its modules
+    assert len(edges) == len(sources) and len(edges[package]) >= 5
+
+
+def test_own_modules_imported_inside_functions_only_by_the_dispatcher_and_lazy_faces():
+    found = [hit for rel, source in _sources() for hit in local_own_imports(rel, source)]
+    assert found == [], "import at the top of the module (or lazily in a package face's __getattr__): " + "; ".join(
+        found)
+
+
+def test_at_most_16_modules_at_the_package_root():
+    found = root_modules(p.name for p in (ROOT / "polyjax").glob("*.py"))
+    assert 10 <= len(found) <= MAX_ROOT_MODULES, found
+
+
+def test_baselines_imports_nothing_private_of_polyjax():
+    found = [hit for rel, source in _sources(("baselines",)) for hit in private_polyjax_imports(rel, source)]
+    assert found == []
+    sources = dict(_sources(("baselines",)))  # the scan sees baselines' imports of polyjax (it is not vacuous)
+    assert any("polyjax" in n for n, _ in imported_modules(sources["baselines/_fit.py"], "baselines"))
+
+
+@pytest.mark.parametrize("sources, circle", [
+    ({"p/__init__.py": "", "p/a.py": "from . import b\n", "p/b.py": "def f():\n    from .a import x\n"},
+     ["p.a", "p.b"]),
+    ({"p/__init__.py": "from .a import x\n", "p/a.py": "import p\n"}, ["p", "p.a"]),
+    ({"p/__init__.py": "", "p/a.py": "from .b import c\n", "p/b.py": "import importlib\n"
+      "def f():\n    return importlib.import_module('p.a')\n"}, ["p.a", "p.b"]),
+    ({"p/__init__.py": "", "p/q/__init__.py": "", "p/q/a.py": "from ..b import x\n", "p/b.py": "from .q import a\n"},
+     ["p.b", "p.q.a"]),
+    ({"p/__init__.py": "from .a import x\n", "p/a.py": "from .b import y\n", "p/b.py": "import numpy\n"}, None),
+])
+def test_circle_check_finds_circles_through_functions_and_faces(sources, circle):
+    assert import_circles(sources) == ([circle] if circle else [])
+
+
+@pytest.mark.parametrize("rel, source, flagged", [
+    ("polyjax/_x.py", "def f():\n    from ._fit import polynomial\n", True),
+    ("polyjax/render/_x.py", "def f():\n    import polyjax as pj\n", True),
+    ("baselines/_x.py", "class A:\n    def m(self):\n        from ._result import BaselineFit\n", True),
+    ("polyjax/render/__init__.py", "def helper():\n    from . import _brdf\n", True),
+    ("polyjax/render/__init__.py", "def __getattr__(name):\n    from . import _brdf\n", False),
+    ("polyjax/cli/_main.py", "def f():\n    from . import _fit\n", False),
+    ("polyjax/_x.py", "from ._fit import polynomial\ndef f():\n    import mitsuba\n", False),
+])
+def test_local_import_check_reads_functions(rel, source, flagged):
+    assert (local_own_imports(rel, source) != []) is flagged
+
+
+@pytest.mark.parametrize("names, over", [
+    ([f"_m{i}.py" for i in range(MAX_ROOT_MODULES)] + ["__init__.py", "__main__.py", "page.html"], False),
+    ([f"_m{i}.py" for i in range(MAX_ROOT_MODULES + 1)] + ["__init__.py"], True),
+])
+def test_root_module_count_leaves_out_the_package_files(names, over):
+    assert (len(root_modules(names)) > MAX_ROOT_MODULES) is over
+
+
+@pytest.mark.parametrize("source, flagged", [
+    ("from polyjax._io import module_kind\n", True),
+    ("from polyjax import _io\n", True),
+    ("import polyjax._fit.saved as saved\n", True),
+    ("def f():\n    from polyjax.render._brdf import rgb_brdf\n", True),
+    ("from polyjax.internal import prepare_inputs\nimport polyjax.render as pr\nfrom polyjax import RESULTS\n", False),
+    ("from ._result import BaselineFit\n", False),
+])
+def test_private_import_check(source, flagged):
+    assert (private_polyjax_imports("baselines/_x.py", source) != []) is flagged

@@ -91,7 +91,7 @@ def test_batched_over_materials_and_channels_and_status():
     mask = jnp.ones(values.shape, bool).at[1, 1].set(False)  # one lane without samples
     fit = bl.fit("ward", u, v, values, mask=mask, n_starts=4)
     assert fit.params.shape == (2, 2, 3) and fit.start_l2.shape == (2, 2, 4)
-    assert int(fit.status[1, 1]) == bl.BaselineStatus.NO_SAMPLES and not bool(fit.success[1, 1])
+    assert int(fit.status[1, 1]) == pj.RESULTS.NO_SAMPLES and not bool(fit.success[1, 1])
     assert bool(jnp.all(jnp.isfinite(fit.params)))
     ok = np.array([[True, True], [True, False]])
     np.testing.assert_allclose(np.asarray(fit.params)[ok], np.asarray(params)[ok], rtol=1e-3)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-from polyjax._cli import main
+from polyjax.cli import main
 
 
 @pytest.mark.data
@@ -31,3 +31,21 @@ def test_main_job_runs_on_synthetic_default_and_says_so(capsys, monkeypatch):
 def test_cli_reports_errors_cleanly(capsys, tmp_path):
     assert main(["fit", "--data-root", str(tmp_path / "nowhere"), "--dataset", "curet:25"]) == 2
     assert "is not a folder" in capsys.readouterr().err
+
+
+def test_damaged_saved_program_is_logged_once_and_the_fit_still_answers(capsys, caplog, tmp_path, monkeypatch):
+    """A kept executable that cannot be read is reported once (naming the file and the reason) and the fit runs
+    without it, with the same numbers as the first run."""
+    monkeypatch.delenv(pj.DATA_ENV, raising=False)
+    args = ["--cache-dir", str(tmp_path), "fit", "--degree", "3", "--json"]
+    assert main(args) == 0
+    first = json.loads(capsys.readouterr().out)
+    (program,) = (tmp_path / "polyjax-programs").glob("fit-*.bin")
+    for _ in range(2):
+        program.write_bytes(b"not a program")
+        with caplog.at_level("WARNING", logger="polyjax"):
+            assert main(args) == 0
+        again = json.loads(capsys.readouterr().out)
+        assert again["coefficients"] == first["coefficients"] and again["l2"] == first["l2"]
+    logged = [r.getMessage() for r in caplog.records if r.name == "polyjax"]
+    assert len(logged) == 1 and program.name in logged[0] and "reading the kept program failed" in logged[0]

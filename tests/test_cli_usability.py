@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-from polyjax._cli import build_parser, main
+from polyjax.cli import build_parser, main
 
 from _data_problems import SMALL_RES, write_astm, write_small_merl
 

@@ -230,7 +230,7 @@ def test_loaders_return_one_mask_row_when_every_lane_has_the_same_valid_bins(tmp
     explicit = pj.fit_polynomial(same.u, same.v, same.values, degree=3, weights=same.weights,
                                  mask=np.broadcast_to(np.asarray(same.mask), same.values.shape))
     np.testing.assert_allclose(fit.l2, explicit.l2, rtol=1e-12)
-    assert np.all(np.asarray(fit.status) == pj.Result.OK)
+    assert np.all(np.asarray(fit.status) == pj.RESULTS.OK)
 
     vals[1, 3] = -1.0  # one more bin, missing in G only
     pj.data.write_merl_binary(tmp_path / "differ.binary", vals, resolution=SMALL_RES, mask=vals >= 0)
@@ -271,8 +271,7 @@ def test_loaded_grid_directions_are_taken_as_unit(tmp_path):
     normalising pass in the first fit): they are, to rounding, what normalising gives."""
     import jax.numpy as jnp
 
-    from polyjax import _inputs
-    from polyjax._geometry import safe_normalize
+    from polyjax import _inputs, safe_normalize
     from polyjax.data import _merl
 
     _merl._device_grid.cache_clear()  # made again by the next load, as in a fresh process
@@ -334,7 +333,7 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
     once, the same value returned); an error there is raised by the caller's call, and not remembered."""
     import threading
 
-    from polyjax.data import _merl
+    from polyjax._cache.memo import GridMemo
 
     calls, started, release = [], threading.Event(), threading.Event()
 
@@ -354,7 +353,7 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
         assert started.wait(10.0)
         threading.Timer(0.1, release.set).start()
 
-    memo = _merl._GridMemo(slow, maxsize=2)
+    memo = GridMemo(slow, maxsize=2)
     under_way(1)
     value = memo(1)
     assert value == [1] and memo(1) is value and calls == [1]

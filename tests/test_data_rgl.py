@@ -115,7 +115,7 @@ def test_merl_grid_subsample_and_spec(data_root):
 def test_export_to_merl_round_trip(data_root, tmp_path, capsys):
     """``polyjax export rgl:<name> --to merl``: read back by ``load_merl_binary``, the same values at the bin
     centres as ``load_rgl`` on the MERL grid."""
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     out = tmp_path / "paper.binary"
     assert main(["export", "rgl:paper_white_rgb", "--to", "merl", "--out", str(out),
@@ -177,7 +177,7 @@ def test_missing_file_and_bad_arguments(tmp_path):
 
 
 def test_command_line_names_a_missing_rgl_file(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     missing = tmp_path / "nothing.bsdf"
     assert main(["fit", "--dataset", f"rgl:{missing}"]) == 2

@@ -416,7 +416,7 @@ def test_mitsuba_sphere_matches_polyjax_render():
 
 
 def test_cli_export_every_format(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     model = MODELS["ward"]
     src = pj.save_model(tmp_path / "fit.npz", model)

@@ -10,7 +10,7 @@ import pytest
 
 import baselines as bl
 import polyjax as pj
-from polyjax._cli import main
+from polyjax.cli import main
 
 PARAMS = [[c, 0.3, 0.4] for c in (0.2, 0.5, 0.8)]
 

@@ -22,7 +22,7 @@ def test_table1_quarry_tile_within_15_percent_and_non_increasing():
     ratio = l2 / np.asarray(PAPER_TABLE1_QUARRY)
     assert np.all(np.abs(ratio - 1) < 0.15), ratio
     assert np.all(np.diff(l2) <= 1e-12), l2
-    assert np.all(np.asarray(m.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(m.status) == pj.RESULTS.OK)
     assert np.all(np.asarray(m.n_params)[:, 0] == 2 * np.arange(1, 7) + 1)
 
 

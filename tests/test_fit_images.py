@@ -72,7 +72,7 @@ def test_refit_of_rendered_polynomial_recovers_coefficients(which):
     """A polynomial model rendered under several lights and refitted from its own images: coefficients to 1e-8."""
     scenes = _scenes() if which == "point" else _mixed_scenes()
     model = pj.fit_polynomial_to_images(scenes, _images(scenes, PHONG), variables="lafortune", degree=4, spp=16)
-    assert np.all(np.asarray(model.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(model.status) == pj.RESULTS.OK)
     assert model.batch_shape == (3,) and model.coefficients.shape == (3, 9)
     # the renderer transports max(f, 0): shift the model (constant Legendre term) to be positive on the hemisphere
     # so that its images are linear in its coefficients
@@ -185,7 +185,7 @@ def test_fit_under_jit_equals_eager_fit():
 def test_no_usable_pixel_is_flagged_not_raised():
     scene = pr.Scene(pr.Camera(width=16, height=16), [pr.Sphere(pr.Lambertian())], [pr.PointLight()])
     model = pj.fit_polynomial_to_images([scene], [np.full((16, 16, 3), np.nan)], degree=2)
-    assert np.all(np.asarray(model.status) == pj.FitStatus.NO_SAMPLES)
+    assert np.all(np.asarray(model.status) == pj.RESULTS.NO_SAMPLES)
     assert np.all(np.asarray(model.n_used) == 0) and np.all(np.isinf(np.asarray(model.l2)))
     assert np.all(np.asarray(model.coefficients) == 0.0)
 

@@ -28,7 +28,7 @@ def fitted():
 def test_cook_torrance_sphere_recovered(fitted):
     images, fit = fitted
     assert fit.params.shape == (3, 4)
-    assert np.all(np.asarray(fit.status) == pj.Result.OK)
+    assert np.all(np.asarray(fit.status) == pj.RESULTS.OK)
     np.testing.assert_allclose(fit.params, jnp.broadcast_to(TRUE, (3, 4)), rtol=1e-4)
     assert float(jnp.max(fit.l2)) < 1e-6
     # the fitted model re-renders the images under a light not used in the fit
@@ -95,7 +95,7 @@ def test_several_light_samples_recovered(which):
     fit = bl.fit_to_images("cook-torrance", _several(pr.Lambertian(), which), images, n_starts=8, spp=8,
                            key=jax.random.PRNGKey(0))
     assert fit.params.shape == (3, 4)
-    assert np.all(np.asarray(fit.status) == pj.Result.OK)
+    assert np.all(np.asarray(fit.status) == pj.RESULTS.OK)
     np.testing.assert_allclose(fit.params, TRUE_RGB, rtol=1e-6)
     assert float(jnp.max(fit.l2)) < 1e-8
     # the fit re-renders the images

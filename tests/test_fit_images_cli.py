@@ -7,7 +7,7 @@ import numpy as np
 
 import polyjax as pj
 import polyjax.render as pr
-from polyjax._cli import main
+from polyjax.cli import main
 
 SIZE = 32
 LIGHTS = [(3.0, 2.0, 4.0), (-3.0, 1.0, 3.0), (0.0, -3.0, 4.0)]
@@ -33,7 +33,7 @@ def test_fit_images_command_recovers_the_api_fit(tmp_path, capsys):
                  str(tmp_path / "m.npz"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["images"] == 3 and out["status_rgb"] == ["OK", "OK", "OK"]
-    from polyjax.render._fit_cli import load_scene_json
+    from polyjax.cli._fit_images import load_scene_json
 
     scenes, images, target = load_scene_json(path)
     api = pj.fit_polynomial_to_images(scenes, images, variables="lafortune", degree=4, target=target)

@@ -12,8 +12,8 @@ import pytest
 from jax.test_util import check_grads
 
 import polyjax as pj
-from polyjax._linalg import eigh
-from polyjax._lstsq import TALL_ROWS
+from polyjax._solve.linalg import eigh
+from polyjax._solve.lstsq import TALL_ROWS
 
 from _problems import curet
 from _robust_problems import random_hemisphere
@@ -357,7 +357,7 @@ def test_rank_deficient_fit_has_finite_minimum_norm_derivatives():
     y = 0.2 + u[:, 2] * v[:, 2] + 0.1 * u[:, 0] * v[:, 0]
     w = jnp.asarray(np.random.default_rng(2).uniform(0.5, 2.0, 6))
     model = pj.fit_polynomial(u, v, y, weights=w, degree=5)
-    assert int(model.status) == pj.FitStatus.RANK_DEFICIENT and int(model.rank) == 6
+    assert int(model.status) == pj.RESULTS.RANK_DEFICIENT and int(model.rank) == 6
 
     def coef(y, w):
         m = pj.fit_polynomial(u, v, y, weights=w, degree=5)

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-import polyjax._cache as cache_mod
-import polyjax._fit as fit_mod
-import polyjax._stream as stream_mod
+import polyjax._cache.compilation as cache_mod
+import polyjax._fit.closed_form as fit_mod
+import polyjax._fit.stream as stream_mod
+import polyjax.cli._progress as progress_mod
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -79,24 +80,24 @@ def test_cache_folder_settings(tmp_path, monkeypatch):
 
 
 def test_compile_notice_one_line_only_while_compiling(monkeypatch):
-    monkeypatch.setattr(cache_mod.compile_notice, "printed", False)
+    monkeypatch.setattr(progress_mod.compile_notice, "printed", False)
     quiet = io.StringIO()
     monkeypatch.setattr(cache_mod, "_counts", {"requests": 3, "answered": 3, "misses": 0})  # every look-up a hit
-    with cache_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=quiet):
+    with progress_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=quiet):
         time.sleep(0.3)
     assert quiet.getvalue() == ""
     loud = io.StringIO()
     monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3, "misses": 1})  # one being compiled
-    with cache_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=loud):
+    with progress_mod.compile_notice("the fit", Path("/nowhere"), delay=0.0, stream=loud):
         time.sleep(0.3)
     assert loud.getvalue().count("\n") == 1 and loud.getvalue().startswith("polyjax: compiling the fit")
     again = io.StringIO()
-    with cache_mod.compile_notice("the fit", None, delay=0.0, stream=again):  # at most one line per process
+    with progress_mod.compile_notice("the fit", None, delay=0.0, stream=again):  # at most one line per process
         time.sleep(0.2)
     assert again.getvalue() == ""
     fast = io.StringIO()
-    monkeypatch.setattr(cache_mod.compile_notice, "printed", False)
-    with cache_mod.compile_notice("the fit", None, delay=5.0, stream=fast):  # cache off, quick block: silence
+    monkeypatch.setattr(progress_mod.compile_notice, "printed", False)
+    with progress_mod.compile_notice("the fit", None, delay=5.0, stream=fast):  # cache off, quick block: silence
         pass
     assert fast.getvalue() == ""
 
@@ -161,7 +162,7 @@ def test_streamed_fit_equals_dense_fit(small_stream, monkeypatch, variables, deg
     np.testing.assert_allclose(streamed.condition, dense.condition, rtol=1e-8)
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(getattr(streamed, field), getattr(dense, field))
-    assert np.all(np.asarray(streamed.status) == pj.Result.OK)
+    assert np.all(np.asarray(streamed.status) == pj.RESULTS.OK)
 
 
 def test_streamed_fit_of_a_nearly_exact_polynomial_takes_the_refining_pass(small_stream):
@@ -187,7 +188,7 @@ def test_streamed_fit_falls_back_on_a_rank_deficient_design(small_stream):
     assert small_stream
     dense = jax.jit(lambda a, b, y: pj.fit_polynomial(a, b, y, "lafortune", 3))(u, u, values)
     np.testing.assert_array_equal(streamed.status, dense.status)
-    assert np.all(np.asarray(streamed.status) == pj.Result.RANK_DEFICIENT)
+    assert np.all(np.asarray(streamed.status) == pj.RESULTS.RANK_DEFICIENT)
     np.testing.assert_allclose(streamed.l2, dense.l2, rtol=1e-10)
 
 
@@ -204,12 +205,12 @@ def test_gradient_of_a_tall_fit_takes_the_dense_path(small_stream):
 
 
 def test_fit_command_parser_leaves_the_other_commands_unimported():
-    from polyjax._cli import _command_of
+    from polyjax.cli._main import _command_of
 
     assert _command_of(["--data-root", "fit", "--no-cache", "fit", "--degree", "3"]) == "fit"
     assert _command_of(["--cache-dir=x", "report"]) == "report"
     assert _command_of(["--help"]) is None
-    code = ("import sys; from polyjax._cli import build_parser, _command_of; "
+    code = ("import sys; from polyjax.cli._main import build_parser, _command_of; "
             "argv = ['--no-cache', 'fit', '--degree', '3']; a = build_parser(_command_of(argv)).parse_args(argv); "
             "print(a.degree, [m for m in ('polyjax.render', 'polyjax.svbrdf', 'polyjax.export') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,

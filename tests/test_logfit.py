@@ -1,4 +1,4 @@
-"""Rusinkiewicz variable sets and the log-space polynomial model f = exp(poly) - eps (polyjax._logfit)."""
+"""Rusinkiewicz variable sets and the log-space polynomial model f = exp(poly) - eps (polyjax._fit.log)."""
 
 import jax
 import jax.numpy as jnp

@@ -221,7 +221,7 @@ def test_fit_derivative_wrt_images_matches_finite_differences(synthetic, opts):
 
 
 def test_fit_photos_and_relight_command_line(synthetic, tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     folder, cap = synthetic
     model = tmp_path / "model.npz"

@@ -5,7 +5,7 @@ import argparse
 import numpy as np
 
 import polyjax.render as pr
-from polyjax.render._cli import add_render_parser, run_render
+from polyjax.cli._render import add_render_parser, run_render
 
 
 def test_render_command_writes_grid_and_psnr(tmp_path, capsys, monkeypatch):

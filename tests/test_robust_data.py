@@ -26,7 +26,7 @@ def test_cayman_lacquer_peak_650_beside_1e_minus_4_fits_finite_float32_close():
     assert vals.max() > 600 and np.min(np.abs(vals[vals != 0])) < 1e-3
     degrees = [1, 5, 10, 15]
     m = pj.fit_polynomial(c, degree=degrees)
-    assert np.all(np.asarray(m.status) == pj.FitStatus.OK) and float(jnp.max(m.condition)) < 100
+    assert np.all(np.asarray(m.status) == pj.RESULTS.OK) and float(jnp.max(m.condition)) < 100
     l2 = np.asarray(m.l2)
     assert np.all(np.isfinite(l2)) and np.all(np.diff(l2, axis=0) <= 1e-9)
     assert np.all(np.isfinite(np.asarray(m(c.u, c.v))))
@@ -43,7 +43,7 @@ def test_curet_negative_noise_values_are_kept_and_fitted():
     assert int(np.sum(vals < 0)) == 29 and int(np.sum(vals == 0)) == 14
     assert bool(np.all(np.broadcast_to(np.asarray(d.mask), vals.shape)[vals < 0]))
     m = pj.fit_polynomial(d, degree=5)
-    assert np.all(np.asarray(m.status) == pj.FitStatus.OK) and np.all(np.isfinite(np.asarray(m.l2)))
+    assert np.all(np.asarray(m.status) == pj.RESULTS.OK) and np.all(np.isfinite(np.asarray(m.l2)))
     kept = np.asarray(pj.cutoff_mask(d.u, d.v))
     lane = int(np.argwhere((vals[:, kept] < 0).any(-1)).ravel()[0])  # a negative value inside the 80-degree cutoff
     clipped = pj.fit_polynomial(d.u, d.v, np.maximum(vals[lane], 0.0), degree=5)
@@ -55,7 +55,7 @@ def test_all_zero_and_constant_materials_fitted_exactly(problem):
     u, v, _ = problem
     vals = np.stack([np.zeros(60), np.full(60, 1e-4), np.full(60, 650.0)])
     m = pj.fit_polynomial(u, v, vals, degree=8)
-    assert np.all(np.asarray(m.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(m.status) == pj.RESULTS.OK)
     assert np.all(np.asarray(m.coefficients[0]) == 0.0) and float(m.l2[0]) == 0.0
     for j, c in ((1, 1e-4), (2, 650.0)):
         assert float(m.l2[j]) < 1e-12 * c
@@ -92,10 +92,10 @@ def test_nan_under_outer_jit_flags_nonfinite_values_lane_only(problem):
     vals = np.stack([b, b.copy(), 2 * b])
     vals[1, 5] = np.nan
     m = jax.jit(lambda u, v, y: pj.fit_polynomial(u, v, y, degree=3))(u, v, vals)
-    np.testing.assert_array_equal(np.asarray(m.status), [0, pj.FitStatus.NONFINITE_VALUES, 0])
+    np.testing.assert_array_equal(np.asarray(m.status), [0, pj.RESULTS.NONFINITE, 0])
     assert np.isinf(float(m.l2[1])) and np.all(np.asarray(m.coefficients[1]) == 0.0)
     ref = pj.fit_polynomial(u, v, np.stack([b, 2 * b]), degree=3)
     np.testing.assert_allclose(np.asarray(m.coefficients[np.array([0, 2])]), np.asarray(ref.coefficients),
                                rtol=1e-10, atol=1e-13)
     masked = jax.jit(lambda u, v, y: pj.fit_polynomial(u, v, y, degree=3, nonfinite="mask"))(u, v, vals)
-    assert np.all(np.asarray(masked.status) == pj.FitStatus.OK) and int(masked.n_used[1]) == 59
+    assert np.all(np.asarray(masked.status) == pj.RESULTS.OK) and int(masked.n_used[1]) == 59

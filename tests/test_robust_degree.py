@@ -22,14 +22,14 @@ def test_degree_15_quarry_condition_reported_and_modest_float32_close_to_float64
     d = curet((QUARRY,))
     m64 = pj.fit_polynomial(d, variables=variables, degree=DEGREES)
     cond = np.asarray(m64.condition)[:, 0]
-    assert np.all(np.asarray(m64.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(m64.status) == pj.RESULTS.OK)
     assert np.all(np.isfinite(cond)) and cond.max() < QUARRY_COND_BOUND[variables], cond
     assert cond[-1] > cond[0]  # reported per degree, growing with p
     l64 = np.asarray(m64.l2)[:, 0]
     assert np.all(np.diff(l64) <= 1e-12)  # nested models: never worse at higher degree
     m32 = pj.fit_polynomial(**as_dtype(d, jnp.float32), variables=variables, degree=DEGREES)
     assert m32.coefficients.dtype == jnp.float32
-    assert np.all(np.asarray(m32.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(m32.status) == pj.RESULTS.OK)
     assert np.all(np.isfinite(np.asarray(m32.coefficients)))
     ratio = np.asarray(m32.l2)[:, 0] / l64
     assert np.all(ratio < F32_L2_FACTOR) and np.all(ratio > 1 / F32_L2_FACTOR), ratio
@@ -52,7 +52,7 @@ def test_degree_15_green_latex_float32_within_factor_of_float64():
     m64 = pj.fit_polynomial(d, degree=[1, 5, 10, 15])
     m32 = pj.fit_polynomial(**as_dtype(d, jnp.float32), degree=[1, 5, 10, 15])
     for m in (m64, m32):
-        assert np.all(np.asarray(m.status) == pj.FitStatus.OK)
+        assert np.all(np.asarray(m.status) == pj.RESULTS.OK)
         assert float(jnp.max(m.condition)) < 100.0
     ratio = np.asarray(m32.l2) / np.asarray(m64.l2)
     assert np.all(np.abs(np.log(ratio)) < np.log(F32_L2_FACTOR)), ratio
@@ -69,7 +69,7 @@ def test_float32_tall_merl_design_keeps_full_rank():
     d = green_latex(20000)
     m64 = pj.fit_polynomial(d, variables="lafortune-anisotropic", degree=15)
     m32 = pj.fit_polynomial(**as_dtype(d, jnp.float32), variables="lafortune-anisotropic", degree=15)
-    assert np.all(np.asarray(m32.status) == pj.FitStatus.OK)
+    assert np.all(np.asarray(m32.status) == pj.RESULTS.OK)
     assert np.all(np.asarray(m32.rank) == 46)
     np.testing.assert_allclose(np.asarray(m32.condition), np.asarray(m64.condition), rtol=1e-2)
     ratio = np.asarray(m32.l2) / np.asarray(m64.l2)

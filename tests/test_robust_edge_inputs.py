@@ -30,7 +30,7 @@ def test_component_constant_up_to_rounding_flagged_in_both_bases(retro, variable
             for basis in ("legendre", "monomial")}
     a, c = random_hemisphere(200, seed=5, min_cos=0.2)
     for m in fits.values():
-        assert int(m.status) == pj.FitStatus.RANK_DEFICIENT and np.isinf(float(m.condition))
+        assert int(m.status) == pj.RESULTS.RANK_DEFICIENT and np.isinf(float(m.condition))
         assert np.isinf(np.asarray(m.halfwidth)).sum() >= 1
         assert np.abs(np.asarray(m.coefficients)).max() < 10.0
         assert float(m.l2) < 2e-3
@@ -74,7 +74,7 @@ def test_nan_under_outer_jit_flagged_whatever_the_mask(two_lanes, how):
     extra = {"no mask": {}, "mask": {"mask": np.ones(b.shape, bool)},
              "per-lane weights": {"weights": np.ones(b.shape)}}[how]
     m = jax.jit(lambda vals: pj.fit_polynomial(u, v, vals, degree=3, **extra))(bad)
-    np.testing.assert_array_equal(np.asarray(m.status), [pj.FitStatus.OK, pj.FitStatus.NONFINITE_VALUES])
+    np.testing.assert_array_equal(np.asarray(m.status), [pj.RESULTS.OK, pj.RESULTS.NONFINITE])
     assert np.isinf(float(m.l2[1])) and np.all(np.asarray(m.coefficients[1]) == 0.0)
     ref = pj.fit_polynomial(u, v, b[0], degree=3)
     np.testing.assert_allclose(np.asarray(m.coefficients[0]), np.asarray(ref.coefficients), rtol=1e-10, atol=1e-13)
@@ -85,7 +85,7 @@ def test_nonfinite_mask_under_outer_jit_drops_the_sample(two_lanes):
     u, v, _, bad = two_lanes
     m = jax.jit(lambda vals: pj.fit_polynomial(u, v, vals, degree=3, nonfinite="mask"))(bad)
     ref = pj.fit_polynomial(u, v, bad, degree=3, nonfinite="mask")
-    np.testing.assert_array_equal(np.asarray(m.status), [pj.FitStatus.OK, pj.FitStatus.OK])
+    np.testing.assert_array_equal(np.asarray(m.status), [pj.RESULTS.OK, pj.RESULTS.OK])
     np.testing.assert_array_equal(np.asarray(m.n_used), np.asarray(ref.n_used))
     np.testing.assert_allclose(np.asarray(m.coefficients), np.asarray(ref.coefficients), rtol=1e-10, atol=1e-13)
 
@@ -126,7 +126,7 @@ def test_half_precision_values_fitted_in_float32(dtype):
     b = jnp.asarray(0.1 + u[:, 2] * v[:, 2] + 0.2 * u[:, 0] * v[:, 0], dtype)
     m = pj.fit_polynomial(u, v, b, degree=3)
     ref = pj.fit_polynomial(u, v, np.asarray(b, np.float64), degree=3)
-    assert m.coefficients.dtype == jnp.float32 and int(m.status) == pj.FitStatus.OK
+    assert m.coefficients.dtype == jnp.float32 and int(m.status) == pj.RESULTS.OK
     np.testing.assert_allclose(float(m.l2), float(ref.l2), rtol=1e-3, atol=1e-6)
 
 

@@ -1,5 +1,5 @@
 """Hard case: optimiser trouble in the baselines. Starts that overflow to NaN/inf loss, starts on the
-parameter bounds, far starts, step limits: reported through BaselineStatus, never selected when
+parameter bounds, far starts, step limits: reported through RESULTS, never selected when
 non-finite, and parameters never NaN."""
 
 import jax.numpy as jnp
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import baselines as bl
+import polyjax as pj
 
 from _baseline_problems import TRUE_PARAMS, synthetic_geometry
 
@@ -28,7 +29,7 @@ def test_best_of_starts_never_picks_a_nan_or_inf_start(problem):
     starts = jnp.stack([jnp.full((4,), 1e200), good, jnp.array([1e154, 1e154, 0.5, 0.5])])
     f = bl.fit(NAME, u, v, y, starts=starts, max_steps=60, refine=None)
     sl2, ss = np.asarray(f.start_l2), np.asarray(f.start_status)
-    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == bl.BaselineStatus.NONFINITE)
+    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == pj.RESULTS.NONFINITE)
     assert int(f.best_start) == 1 and bool(f.success) and float(f.l2) < 1e-8
     np.testing.assert_allclose(np.asarray(f.params), TRUE_PARAMS[NAME], rtol=1e-5)
 
@@ -38,7 +39,7 @@ def test_every_start_nonfinite_reported_and_parameters_not_nan(problem):
     # three starts and 60 steps, as above, so that the compiled fit of the test above serves (the steps are never
     # taken: every start is non-finite from the outset)
     f = bl.fit(NAME, u, v, y, starts=jnp.full((3, 4), 1e200), max_steps=60, refine=None)
-    assert int(f.status) == bl.BaselineStatus.NONFINITE and not bool(f.success)
+    assert int(f.status) == pj.RESULTS.NONFINITE and not bool(f.success)
     assert not np.any(np.isnan(np.asarray(f.params))) and np.isinf(float(f.l2))
 
 
@@ -63,7 +64,7 @@ def test_far_start_and_step_limit_reported_as_max_steps(problem):
     u, v, y, m = problem
     far = m.to_raw(jnp.array([1e5, 1e5, 2.9, 0.999]))[None]
     f = bl.fit(NAME, u, v, y, starts=far, max_steps=3, refine=None, limit_steps=0)
-    assert int(f.status) == bl.BaselineStatus.MAX_STEPS and not bool(f.success)
+    assert int(f.status) == pj.RESULTS.MAX_STEPS and not bool(f.success)
     assert np.all(np.isfinite(np.asarray(f.params))) and np.isfinite(float(f.l2))
 
 
@@ -77,7 +78,7 @@ def test_best_of_starts_skips_nonfinite_starts_on_both_backends_and_in_the_two_s
     starts = jnp.stack([jnp.full((4,), 1e200), good, jnp.array([1e154, 1e154, 0.5, 0.5])])
     f = bl.fit(NAME, u, v, y, starts=starts, max_steps=60, refine=refine, backend=backend)
     sl2, ss = np.asarray(f.start_l2), np.asarray(f.start_status)
-    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == bl.BaselineStatus.NONFINITE)
+    assert np.isinf(sl2[[0, 2]]).all() and np.all(ss[[0, 2]] == pj.RESULTS.NONFINITE)
     assert int(f.best_start) == 1 and bool(f.success) and float(f.l2) < 1e-8
     assert np.all(np.isfinite(np.asarray(f.params)))
 
@@ -93,7 +94,7 @@ def test_optimum_on_a_range_limit_converges_and_is_flagged(name, params, limit):
     u, v = synthetic_geometry(300, seed=7)
     y = bl.get_model(name).evaluate(jnp.asarray(params), u, v)
     f = bl.fit(name, u, v, y, n_starts=8)
-    assert bool(f.success) and int(f.status) == bl.BaselineStatus.OK, (int(f.status), int(f.steps))
+    assert bool(f.success) and int(f.status) == pj.RESULTS.OK, (int(f.status), int(f.steps))
     assert float(f.l2) < 1e-6 * float(jnp.sqrt(jnp.mean(y * y)))
     np.testing.assert_allclose(f.params, params, rtol=1e-3, atol=1e-6)
     assert np.asarray(f.at_limit).tolist() == limit

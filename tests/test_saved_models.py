@@ -13,7 +13,7 @@ import pytest
 import baselines
 import polyjax as pj
 import polyjax.render as pr
-from polyjax._cli import main
+from polyjax.cli import main
 
 from _data_problems import write_small_merl
 
@@ -90,12 +90,12 @@ def test_newer_version_and_unknown_kind_are_clear_errors(tmp_path, ward_fit):
 
 def test_model_kind_found_through_an_entry_point(tmp_path, monkeypatch):
     """A package that polyjax never imports provides its kind through the entry point group polyjax.models."""
-    from polyjax import _kinds
+    from polyjax import _io as _kinds
 
     (tmp_path / "toykinds.py").write_text(textwrap.dedent('''
         import equinox as eqx
         import jax.numpy as jnp
-        from polyjax._kinds import module_kind
+        from polyjax.internal import module_kind
 
         class Toy(eqx.Module):
             scale: jnp.ndarray

@@ -16,8 +16,8 @@ from _standard_problems import (
 
 import baselines as bl
 import polyjax as pj
-from baselines._openpbr import open_pbr_surface
-from baselines._usd_preview import usd_preview_surface
+from baselines._models.openpbr import open_pbr_surface
+from baselines._models.usd_preview import usd_preview_surface
 
 from _baseline_problems import synthetic_geometry
 
@@ -69,7 +69,7 @@ def test_usd_preview_matches_storms_preview_surface(pairs, case):
 def test_special_cases_of_the_closures(pairs):
     """EON is Lambert at zero diffuse roughness; Hoffman's F82 reaches ``F82 * Schlick`` at cos = 1/7 and is
     Schlick's Fresnel for F82 = 1."""
-    from baselines import _mx_microfacet as mx
+    from baselines._models import mx_microfacet as mx
 
     u, v = (jnp.asarray(a) for a in pairs)
     nv, nl = mx.clamp_cos(v[:, 2]), mx.clamp_cos(u[:, 2])

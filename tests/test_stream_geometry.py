@@ -1,4 +1,4 @@
-"""The streamed fit's geometry (``polyjax/_stream.py``): a QR of the weighted design as accurate as Householder's,
+"""The streamed fit's geometry (``polyjax/_fit/stream.py``): a QR of the weighted design as accurate as Householder's,
 whichever way its preconditioner was found (a sample of the rows, every row, or a further pass)."""
 
 import jax
@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-import polyjax._stream as stream_mod
+import polyjax._cache.keys as keys
+import polyjax._cache.memo as memo
+import polyjax._fit.stream as stream_mod
 from polyjax._basis import term_degrees
 
 N = 2600  # with blocks of 512 rows: 5 blocks and a remainder; the sample is every 2nd row (n // 1024 = 2)
@@ -32,7 +34,7 @@ def _problem(seed=0, narrow_sample=False):
 
 def _geometry(u, v, weights, variables="lafortune", degree=4):
     x = pj.explanatory_variables(variables, u, v)
-    w, wc2 = pj.fit_weights(u, v, weights, None, 80.0)
+    w, wc2 = pj.internal.fit_weights(u, v, weights, None, 80.0)
     k = x.shape[1]
     active = jnp.asarray(term_degrees(k, degree, False))[None, :] <= jnp.asarray([degree])[:, None]
     geo = jax.jit(lambda x, w, wc2: stream_mod.stream_geometry(
@@ -88,14 +90,14 @@ def test_forced_further_pass_gives_the_same_factor(monkeypatch, variables, degre
     np.testing.assert_allclose(geo3["s"], geo["s"], rtol=1e-13)
 
 
-# the geometry kept on disk (polyjax/_geometry_store.py)
+# the geometry kept on disk (polyjax/_cache/geometry.py)
 
 @pytest.fixture
 def kept(monkeypatch, tmp_path):
     """Streamed fits from 2000 rows on (blocks of 512) with the geometry kept in ``tmp_path``; counts the geometries
     computed (not loaded)."""
-    import polyjax._fit as fit_mod
-    import polyjax._geometry_store as store
+    import polyjax._cache.geometry as store
+    import polyjax._fit.closed_form as fit_mod
 
     monkeypatch.setattr(stream_mod, "STREAM_ROWS", 2000)
     monkeypatch.setattr(stream_mod, "BLOCK", 512)
@@ -111,18 +113,17 @@ def kept(monkeypatch, tmp_path):
     monkeypatch.setattr(fit_mod, "_geometry_kernel", counting)
     for kernel in (fit_mod._fit_kernel, original):
         kernel.clear_cache()  # BLOCK is read when a kernel is traced
-    fit_mod._GEOMETRY_MEMO.clear()
+    memo._GEOMETRY_MEMO.clear()
     yield computed, tmp_path
-    fit_mod._GEOMETRY_MEMO.clear()
+    memo._GEOMETRY_MEMO.clear()
     for kernel in (fit_mod._fit_kernel, original):
         kernel.clear_cache()
 
 
 def _fit_fresh(u, v, values, weights, degree=4):
     """A fit as the first one of a process: the in-process geometry memo forgotten."""
-    import polyjax._fit as fit_mod
 
-    fit_mod._GEOMETRY_MEMO.clear()
+    memo._GEOMETRY_MEMO.clear()
     return pj.fit_polynomial(u, v, values, "lafortune", degree, weights=weights)
 
 
@@ -166,7 +167,7 @@ def test_kept_geometry_is_not_used_when_its_inputs_differ(kept):
 
 
 def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
-    import polyjax._geometry_store as store
+    import polyjax._cache.geometry as store
 
     computed, folder = kept
     u, v, weights = _problem(6)
@@ -184,14 +185,13 @@ def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
     np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
     assert len(computed) == 3
     # another grid's geometry written under this key, with a valid checksum: its samples and weight do not match
-    import polyjax._fit as fit_mod
 
     u2, v2, w2 = _problem(7)
     w2[:100] = 0.0
-    fit_mod._GEOMETRY_MEMO.clear()
+    memo._GEOMETRY_MEMO.clear()
     other = pj.fit_polynomial(u2, v2, _values(u2, v2), "lafortune", 4, weights=w2)
-    assert np.all(np.asarray(other.status) == pj.Result.OK)
-    foreign = fit_mod._GEOMETRY_MEMO["last"]["geo"]
+    assert np.all(np.asarray(other.status) == pj.RESULTS.OK)
+    foreign = memo._GEOMETRY_MEMO["last"]["geo"]
     store.save(folder, key, foreign)
     n_computed = len(computed)
     np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
@@ -201,26 +201,25 @@ def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
 def test_loader_grid_directions_are_named_not_checksummed():
     """The MERL loader's grid directions are fingerprinted by name (made by polyjax's code, which is in the key);
     any other array, a copy of them included, by the CRC-32 of its bytes."""
-    import polyjax._geometry_store as store
     from polyjax.data import _merl
 
     u, v, w, _ = _merl._device_grid(pj.data.MERL_RESOLUTION, "float64")
-    assert store._fingerprint(u) == "merl-grid:(90, 90, 180):float64:u"
-    assert store._fingerprint(v) == "merl-grid:(90, 90, 180):float64:v"
+    assert keys.fingerprint(u) == "merl-grid:(90, 90, 180):float64:u"
+    assert keys.fingerprint(v) == "merl-grid:(90, 90, 180):float64:v"
     copy = jnp.array(u)
-    assert store._fingerprint(copy) == store._fingerprint(np.asarray(u)) != store._fingerprint(u)
+    assert keys.fingerprint(copy) == keys.fingerprint(np.asarray(u)) != keys.fingerprint(u)
     changed = np.asarray(u).copy()
     changed[12345, 1] = np.nextafter(changed[12345, 1], 2.0)
-    assert store._fingerprint(changed) != store._fingerprint(copy)
+    assert keys.fingerprint(changed) != keys.fingerprint(copy)
 
 
 @pytest.mark.parametrize("variables,degrees", [("lafortune", [4]), ("ashikhmin-shirley", [1, 3])])
 def test_kept_fields_template_is_the_geometry_shape(variables, degrees):
     """The shapes and dtypes a kept geometry is checked against are those the geometry has."""
-    import polyjax._fit as fit_mod
-    import polyjax._geometry_store as store
-    from polyjax._basis import n_terms
-    from polyjax._inputs import prepare_inputs
+    import polyjax._cache.geometry as store
+    import polyjax._fit.closed_form as fit_mod
+    from polyjax import n_terms
+    from polyjax.internal import prepare_inputs
 
     u, v, weights = _problem(8)
     inp, _ = prepare_inputs("fit_polynomial", u, v, _values(u, v), weights, None, cutoff_deg=80.0)
@@ -245,7 +244,7 @@ def test_kept_rows_block_by_block_are_the_whole_rows():
     transform = [geo[f] for f in ("mean", "rotation", "centre", "halfwidth")]
 
     def sample(u, v, w, m):
-        wl, wc2l = pj.fit_weights(u, v, w, m, 80.0)
+        wl, wc2l = pj.internal.fit_weights(u, v, w, m, 80.0)
         return pj.explanatory_variables("lafortune", u, v), wl, wc2l
 
     whole = jax.jit(lambda *a: stream_mod.stream_rows(*sample(*a), *transform))(u, v, weights, mask)
@@ -259,7 +258,6 @@ def test_kept_rows_block_by_block_are_the_whole_rows():
 def test_fit_after_a_kept_geometry_reuses_its_rows(kept):
     """The first fit on a kept geometry makes its rows inside the fit's program; the next fit on the same samples
     uses that completed geometry (nothing computed or read again) and agrees with a fit on the cold geometry."""
-    import polyjax._fit as fit_mod
 
     computed, folder = kept
     u, v, weights = _problem(10)
@@ -267,12 +265,12 @@ def test_fit_after_a_kept_geometry_reuses_its_rows(kept):
     u, v = jnp.asarray(u), jnp.asarray(v)  # the same device arrays for every fit (as a loader's grid)
     cold = _fit_fresh(u, v, values, weights)
     warm = _fit_fresh(u, v, values, weights)
-    geo = fit_mod._GEOMETRY_MEMO["last"]["geo"]
+    geo = memo._GEOMETRY_MEMO["last"]["geo"]
     assert len(computed) == 1 and set(geo) >= {"t", "wc2"} and "sw" not in geo
     for path in folder.glob("geometry-*.npz"):
         path.unlink()  # the memo, not the disk, serves the next fit
     later = pj.fit_polynomial(u, v, values * 2.0, "lafortune", 4, weights=weights)
-    assert len(computed) == 1 and fit_mod._GEOMETRY_MEMO["last"]["geo"] is geo
+    assert len(computed) == 1 and memo._GEOMETRY_MEMO["last"]["geo"] is geo
     np.testing.assert_allclose(warm.l2, cold.l2, rtol=1e-14)
     np.testing.assert_allclose(later.l2, 2.0 * cold.l2, rtol=1e-13)
     np.testing.assert_allclose(later.coefficients, 2.0 * cold.coefficients, rtol=1e-12, atol=1e-14)

@@ -30,7 +30,7 @@ def _recovery_ratios(capture_fit, at_least_one=True):
     """Per texel and channel: L2 of the texel's fit (48 photographs at one view direction) on the MERL grid
     against the texel's true blend, over the L2 of the fit to that blend's own MERL-grid data at the same degree."""
     mats, cap, model = capture_fit
-    assert np.all(np.asarray(model.status) == pj.Result.OK)
+    assert np.all(np.asarray(model.status) == pj.RESULTS.OK)
     materials = MATERIALS
     grid = pj.data.load_merl_nbrdf(list(materials), subsample=20000)
     a = np.asarray(cap.blend)
@@ -109,7 +109,7 @@ def test_rerender_under_new_light(capture_fit, tmp_path):
 
 @pytest.mark.data
 def test_svbrdf_cli(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     rc = main(["svbrdf", "--size", "8", "--lights", "48", "--materials", ",".join(MATERIALS), "--degree",
                str(DEGREE), "--out", str(tmp_path / "tex"), "--json"])
@@ -129,7 +129,7 @@ def test_svbrdf_cli(tmp_path, capsys):
 def test_svbrdf_cli_cameras(tmp_path, capsys):
     """``--cameras 3`` (``svbrdf.spread_cameras(3)``) and explicit positions: every texel fitted from C K
     photographs, re-rendered from every camera."""
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     for cams, c in (("3", 3), ("0,-1.5,2.5;1,1,2", 2)):
         out_dir = tmp_path / f"tex{c}"
@@ -146,7 +146,7 @@ def test_svbrdf_cli_cameras(tmp_path, capsys):
 
 
 def test_svbrdf_cli_bad_light(tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     assert main(["svbrdf", "--new-light", "1,2", "--out", str(tmp_path)]) == 2
     assert "--new-light: expected 3 comma-separated numbers" in capsys.readouterr().err

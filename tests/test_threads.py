@@ -1,4 +1,4 @@
-"""LAPACK's threads: one in a process that runs polyjax, set at its first call and kept (polyjax/_threads.py).
+"""LAPACK's threads: one in a process that runs polyjax, set at its first call and kept (polyjax/_solve/threads.py).
 
 Each check runs in a fresh process, so that the libraries start as a user's process starts them: OpenBLAS with
 the user's ``OPENBLAS_NUM_THREADS`` and jaxlib's LAPACK either not loaded yet or loaded by the user's own scipy

@@ -22,8 +22,8 @@ def problem():
 def test_zernike_order_20_on_205_samples_is_rank_deficient_not_ok(problem):
     u, v, b = problem
     f = bl.fit("zernike", u, v, b, order=20)  # 506 terms, at most 205 samples
-    assert int(f.status) == pj.Result.RANK_DEFICIENT and not bool(f.success)
-    assert int(bl.fit("zernike", u, v, b, order=8).status) == pj.Result.OK
+    assert int(f.status) == pj.RESULTS.RANK_DEFICIENT and not bool(f.success)
+    assert int(bl.fit("zernike", u, v, b, order=8).status) == pj.RESULTS.OK
 
 
 def test_zernike_absurd_order_is_refused_up_front(problem):
@@ -77,14 +77,23 @@ def test_model_call_with_mismatched_directions_names_u_and_v(problem):
 def test_overflowing_l2_is_flagged_nonfinite_not_ok(problem):
     u, v, b = problem
     m = pj.fit_polynomial(u, v, b * 1e300, degree=3)
-    assert not np.isfinite(float(m.l2)) and int(m.status) == pj.Result.NONFINITE
+    assert not np.isfinite(float(m.l2)) and int(m.status) == pj.RESULTS.NONFINITE
 
 
 def test_one_result_code_for_every_fitter():
-    assert bl.BaselineStatus is pj.Result and pj.FitStatus is pj.Result
-    assert pj.RESULTS[pj.RESULTS.rank_deficient].startswith("the weighted design")
-    for item in pj.Result:
-        assert int(getattr(pj.RESULTS, item.name.lower().replace("_values", ""))._value) == int(item)
+    assert [(r.name, int(r)) for r in pj.RESULTS] == [
+        ("OK", 0), ("RANK_DEFICIENT", 1), ("NO_SAMPLES", 2), ("NONFINITE", 3), ("MAX_STEPS", 4), ("FAILED", 5)]
+    assert pj.RESULTS.RANK_DEFICIENT.message.startswith("the weighted design")
+    assert "RESULTS" in pj.__all__ and not {"Result", "FitStatus"} & set(pj.__all__)
+    assert "BaselineStatus" not in bl.__all__
+    # the former names: the same enumeration (and code 3 under its former second name), with a warning
+    for get in (lambda: pj.Result, lambda: pj.FitStatus, lambda: bl.BaselineStatus):
+        with pytest.warns(DeprecationWarning, match="use polyjax.RESULTS"):
+            assert get() is pj.RESULTS
+    with pytest.warns(DeprecationWarning, match="use RESULTS.NONFINITE"):
+        assert pj.RESULTS.NONFINITE_VALUES is pj.RESULTS.NONFINITE
+    with pytest.warns(DeprecationWarning, match="use RESULTS.RANK_DEFICIENT"):
+        assert pj.RESULTS.rank_deficient is pj.RESULTS.RANK_DEFICIENT
 
 
 def test_baselines_fit_under_jit_prepares_traced_inputs(problem):
@@ -110,7 +119,7 @@ def test_shared_mask_of_shape_n_takes_the_shared_design_path(problem):
     u, v, b = problem
     mask = np.ones(205, bool)
     mask[:20] = False
-    inp, _ = pj.prepare_inputs("test", u, v, np.stack([b, 2 * b]), mask=mask)
+    inp, _ = pj.internal.prepare_inputs("test", u, v, np.stack([b, 2 * b]), mask=mask)
     assert inp.shared and inp.mask.shape == (1, 205)
     m = pj.fit_polynomial(u, v, np.stack([b, 2 * b]), mask=mask, degree=3)
     ref = pj.fit_polynomial(u[20:], v[20:], np.stack([b, 2 * b])[:, 20:], degree=3)

@@ -10,7 +10,7 @@ import pytest
 
 import baselines as bl
 import polyjax as pj
-from polyjax._cli import main
+from polyjax.cli import main
 
 from _problems import random_hemisphere
 
@@ -186,13 +186,14 @@ def test_compile_notice_is_quiet_while_the_cache_reads_programs_it_holds(monkeyp
     import time
     from pathlib import Path
 
-    import polyjax._cache as cache_mod
+    import polyjax._cache.compilation as cache_mod
+    import polyjax.cli._progress as progress_mod
 
-    monkeypatch.setattr(cache_mod.compile_notice, "printed", False)
+    monkeypatch.setattr(progress_mod.compile_notice, "printed", False)
     # a warm run loading a large program: a look-up not yet answered, and no miss (nothing is compiled)
     monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3, "misses": 0})
     quiet = io.StringIO()
-    with cache_mod.compile_notice("the fit", Path("cache"), delay=0.0, stream=quiet):
+    with progress_mod.compile_notice("the fit", Path("cache"), delay=0.0, stream=quiet):
         time.sleep(0.3)
     assert quiet.getvalue() == ""
 
@@ -215,20 +216,20 @@ def test_negative_weights_refused_eagerly_and_flagged_under_jit_never_clipped(pr
     with pytest.raises(pj.InputError, match="weights: expected finite, non-negative"):
         pj.fit_polynomial(u, v, b, weights=w, degree=2)
     m = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.asarray(w))
-    assert int(m.status) == pj.Result.NONFINITE and np.isinf(float(m.l2))
+    assert int(m.status) == pj.RESULTS.NONFINITE and np.isinf(float(m.l2))
     ok = jax.jit(lambda w: pj.fit_polynomial(u, v, b, weights=w, degree=2))(jnp.ones(205))
-    assert int(ok.status) == pj.Result.OK and np.isfinite(float(ok.l2))
+    assert int(ok.status) == pj.RESULTS.OK and np.isfinite(float(ok.l2))
 
 
 # ---------------------------------------------------------------- 12: every variable set in --help, a --link flag
 def test_fit_help_lists_every_variable_set_and_a_link_flag(monkeypatch):
-    from polyjax._cli import build_parser
+    from polyjax.cli import build_parser
 
     monkeypatch.setenv("COLUMNS", "2000")  # one line per option: names are not wrapped at their hyphens
     sub = build_parser("fit")._subparsers._group_actions[0].choices["fit"]
     text = sub.format_help().replace("\n", " ")
     text = " ".join(text.split())
-    from polyjax._cli import BUILTIN_VARIABLES
+    from polyjax.cli._args import BUILTIN_VARIABLES
 
     for name in BUILTIN_VARIABLES:  # the built-in sets (other tests of the process register their own)
         assert name in text, name
@@ -376,7 +377,7 @@ def test_long_work_shows_an_elapsed_time_line_on_a_terminal_only(monkeypatch):
     import io
     import time
 
-    from polyjax._progress import progress_line
+    from polyjax.cli._progress import progress_line
 
     monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
     term, pipe = _Terminal(), io.StringIO()

@@ -283,7 +283,7 @@ def _saved(model, tmp_path):
 
 
 def test_cli_writes_a_page_and_names_bad_arguments(model, tmp_path, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     fit = _saved(model, tmp_path)
     out = tmp_path / "page.html"
@@ -334,7 +334,7 @@ def test_models_without_an_expression_are_tabulated_on_the_merl_grid(model):
 
 @pytest.mark.slow
 def test_report_html_is_a_page_of_the_reports_fits(browser, tmp_path, monkeypatch, capsys):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     monkeypatch.delenv(pj.DATA_ENV, raising=False)
     out = tmp_path / "report.html"

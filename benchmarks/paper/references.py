@@ -101,7 +101,7 @@ def scipy_best_l2(name: str, u, v, values, starts, *, weights=None, mask=None, c
 
     u, v = jnp.asarray(u), jnp.asarray(v)
     y = jnp.asarray(values)
-    w, wc2 = pj.fit_weights(u, v, weights, mask, cutoff_deg)
+    w, wc2 = pj.internal.fit_weights(u, v, weights, mask, cutoff_deg)
     w, wc2 = jnp.broadcast_to(w, y.shape), jnp.broadcast_to(wc2, y.shape)
     den = jnp.sum(w, axis=-1, keepdims=True)
     sw2 = wc2 / jnp.where(den > 0, den, 1.0)

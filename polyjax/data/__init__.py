@@ -61,10 +61,27 @@ from ._nbrdf import (
     nbrdf_names,
     resolve_merl_name,
 )
-from ._photometric import PNG16_MAX, check_png_header, load_photometric, read_mat_array, read_png
 from ._rgl import RGLBRDF, load_rgl, read_rgl, resolve_rgl_path
 from ._synthetic import synthetic_default
 from ._tabulate import tabulate
+
+#: the photographs' loaders, imported on first use: a capture is rendered by polyjax.render (polyjax.inverse)
+_LAZY_NAMES = ("PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png")
+
+
+def __getattr__(name):
+    if name in _LAZY_NAMES:
+        import importlib  # the lazy package face: the photographs' module imported on first use
+
+        value = getattr(importlib.import_module("._photometric", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'polyjax.data' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_NAMES))
+
 
 __all__ = [
     "DATA_ENV", "data_root", "has_data_root", "ANISOTROPIC_SAMPLES", "ISOTROPIC_52", "TABLE2_SAMPLES",

@@ -32,7 +32,7 @@ from typing import Sequence
 import numpy as np
 
 from .._config import data_file
-from .._errors import InputError
+from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements, make_measurements
 from ._colour import spectral_to_luminance, spectral_to_rgb, spectral_to_xyz, xyz_to_rgb_matrix
 from ._errors import (
@@ -263,8 +263,6 @@ def _resolve_cornell(path_or_name, root) -> Path:
     p = Path(s).expanduser()
     if p.suffix or os.sep in s or "/" in s or p.is_file():
         if not p.is_file():
-            from .._errors import DataNotFoundError
-
             raise DataNotFoundError(f"Cornell BRDF file {s!r}: no such file")
         return p
     key = s.strip().lower().replace("-", "_").replace(" ", "_")

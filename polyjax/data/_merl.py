@@ -46,15 +46,17 @@ to within 0.1 % at MERL's resolution (the horizon cuts cells; checked in the tes
 
 from __future__ import annotations
 
-import concurrent.futures
 import functools
 import os
 import threading
 from pathlib import Path
 from typing import Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+from .._cache.memo import grid_memo, remember_content, remember_unit_directions
 from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements, lane_mask
 from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
@@ -431,75 +433,12 @@ def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarr
     return np.sort(rng.choice(idx, size=count, replace=False))
 
 
-class _GridMemo:
-    """A per-process memo of a grid function of hashable arguments (``lru_cache``'s role: the same arrays for every
-    file on a grid), whose value may also be computed in a background thread (:meth:`start`): a call while that
-    computation is under way waits for it instead of doing the work again. The oldest of more than ``maxsize``
-    values is dropped; :meth:`cache_clear` forgets every value (as a fresh process)."""
-
-    def __init__(self, fn, maxsize: int):
-        functools.update_wrapper(self, fn)
-        self._fn, self._maxsize = fn, maxsize
-        self._futures: dict = {}
-        self._lock = threading.Lock()
-
-    def __call__(self, *args):
-        with self._lock:
-            fut = self._futures.get(args)
-            mine = fut is None
-            if mine:
-                fut = self._futures[args] = concurrent.futures.Future()
-                done = [k for k, f in self._futures.items() if f.done()]
-                for k in done[: max(0, len(self._futures) - self._maxsize)]:
-                    del self._futures[k]
-        if not mine:
-            return fut.result()
-        try:
-            value = self._fn(*args)
-        except BaseException as e:
-            with self._lock:
-                self._futures.pop(args, None)
-            fut.set_exception(e)
-            raise
-        fut.set_result(value)
-        return value
-
-    def start(self, *args) -> None:
-        """Compute the value of ``args`` in a daemon thread unless it is known or under way (numpy releases the
-        interpreter lock in its array loops, so the work runs beside the caller's, e.g. a file being read). An
-        error there is raised again by the caller's own call."""
-        with self._lock:
-            if args in self._futures:
-                return
-
-        def run():
-            try:
-                self(*args)
-            except BaseException:  # noqa: BLE001 - the caller's own call raises it
-                pass
-
-        threading.Thread(target=run, name=f"polyjax-{self._fn.__name__}", daemon=True).start()
-
-    def cache_clear(self) -> None:
-        with self._lock:
-            self._futures.clear()
-
-
-def _grid_memo(maxsize: int):
-    return lambda fn: _GridMemo(fn, maxsize)
-
-
-@_grid_memo(maxsize=2)
+@grid_memo(maxsize=2)
 def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     """Device arrays ``(u, v, w)`` of all bins above the horizon (the usual sample set) and an all-True ``(n,)``
     mask; cached: every file on this grid hands out the same arrays (what a fit keeps for the grid is found
     again by identity). :func:`load_merl_binary` starts it in a thread (``_device_grid.start``) as soon as a file's
     header is read, so a process's first load makes the grid while the file is read and its values gathered."""
-    import jax
-
-    from .._geometry_store import remember_content
-    from .._inputs import remember_unit_directions
-
     idx = _above_index(resolution)
     u, v = _above_directions(resolution, idx, dtype_name)
     w = _aligned_empty(idx.shape, dtype_name)  # aligned: jax.device_put takes it over without a copy
@@ -509,7 +448,8 @@ def _device_grid(resolution: tuple[int, int, int], dtype_name: str):
     else:
         np.copyto(w, weights[idx])
     grid = tuple(jax.device_put(a) for a in (u, v, w)) + (jax.device_put(np.ones(idx.size, bool)),)
-    remember_unit_directions(grid[0], grid[1], grid[3])  # unit by construction (to rounding): not normalised again
+    # unit by construction (to rounding): not normalised again
+    remember_unit_directions(grid[0], grid[1], (grid[0], grid[1], grid[3]))
     for a, what in zip(grid[:2], "uv"):  # named for the geometry kept on disk: no checksum of their bytes needed
         remember_content(a, f"merl-grid:{resolution}:{dtype_name}:{what}")
     return grid
@@ -556,7 +496,7 @@ def _in_two_threads(first, second) -> None:
         raise errors[0]
 
 
-@_grid_memo(maxsize=4)
+@grid_memo(maxsize=4)
 def _above_index(resolution: tuple[int, int, int]) -> np.ndarray:
     """File-order indices of the bins with both directions above the horizon.
 
@@ -584,8 +524,6 @@ def _aligned_empty(shape, dtype) -> np.ndarray:
 
 def _default_float_name() -> str:
     """The name of JAX's default float dtype (``float64`` with x64 on), the dtype of the loaders' arrays."""
-    import jax.numpy as jnp
-
     return jnp.dtype(jnp.result_type(float)).name
 
 
@@ -593,9 +531,6 @@ def _merl_measurements(values, resolution, *, subsample, seed, names, source, sc
     """values ``(m, 3, N)`` (negative = missing) -> Measurements over the kept bins; ``scale`` ``(3,)`` multiplies
     the kept values (the stored numbers of a ``.binary`` file are scaled after the gather). The mask is ``(n,)``
     when every lane has the same valid bins (:func:`lane_mask`)."""
-    import jax
-    import jax.numpy as jnp
-
     resolution = tuple(resolution)
     dtype = jnp.dtype(_default_float_name())
     if subsample is None:  # the usual case: gather the bins above the horizon once, then look at validity

@@ -31,6 +31,7 @@ from pathlib import Path, PurePosixPath
 from typing import Sequence
 
 import equinox as eqx
+import h5py
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -222,8 +223,6 @@ def _parse_weights(blob: bytes, path: Path, member: str) -> tuple[np.ndarray, ..
     Layers are recognised by their kernels' shapes (6, 21), (21, 21), (21, 3), whatever Keras named them
     (``dense_1``, ``dense_4`` ...); each bias is the ``bias`` dataset beside its kernel.
     """
-    import h5py
-
     try:
         f = h5py.File(io.BytesIO(blob), "r")
     except OSError as e:

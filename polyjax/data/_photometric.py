@@ -26,8 +26,10 @@ import zlib
 from typing import Sequence
 
 import numpy as np
+import png
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
+from ..inverse._capture import Capture
 
 #: the camera's white level: a 16-bit PNG value is divided by it (and 1.0 is a saturated pixel)
 PNG16_MAX = 65535.0
@@ -37,8 +39,6 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
     """The pixels of a PNG as an integer array ``(H, W, channels)`` (``(H, W)`` for one channel), at its own bit
     depth (16-bit values are kept). ``bits``: the bit depth expected (None: any). Raises
     :class:`polyjax.DataFormatError` naming the file when it is not a PNG or has another depth."""
-    import png
-
     try:
         w, h, rows, info = png.Reader(filename=path).asDirect()
         data = np.array([np.asarray(r, dtype=np.uint16) for r in rows])
@@ -55,8 +55,6 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
 def check_png_header(path: str, bits: int, shape: tuple[int, int], planes: int) -> None:
     """Check a PNG's header (no pixel is decoded): ``bits`` per channel, ``planes`` channels, ``shape = (H, W)``.
     Raises :class:`polyjax.DataFormatError` naming the file otherwise."""
-    import png
-
     try:
         with open(path, "rb") as fh:
             r = png.Reader(file=fh)
@@ -220,8 +218,6 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
             the mask's size, normals not of unit length on the mask, a malformed file (each naming the file).
         InputError: light indices out of range.
     """
-    from .._capture import Capture
-
     folder = os.fspath(folder)
     if not os.path.isdir(folder):
         raise DataNotFoundError(f"{folder}: not a folder (expected a DiLiGenT object folder, e.g. pmsData/ballPNG)")

@@ -7,9 +7,9 @@ from collections.abc import Callable, Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from .._arrays import is_concrete
+from .._directions import safe_normalize
 from .._errors import InputError
-from .._geometry import safe_normalize
-from .._inputs import is_concrete
 from .._measurements import Measurements, lane_mask
 from ._merl import MERL_RESOLUTION, _choose_bins, merl_grid
 

@@ -22,6 +22,7 @@ import numpy as np
 from .._basis import exponents
 from .._errors import InputError
 from .._model import PolynomialBRDF
+from ..data._nbrdf import NeuralBRDF
 from ..render._brdf import transported
 
 INPUTS = ("ux", "uy", "uz", "vx", "vy", "vz")
@@ -150,7 +151,7 @@ class Program:
         if dialect == "numpy":
             env = {"np": np}
         else:
-            import drjit as dr
+            import drjit as dr  # optional (the "mitsuba" extra): imported where used
 
             env = {"dr": dr}
         code = compile(self.python_source(dialect), f"<polyjax {dialect} export>", "exec")
@@ -264,8 +265,6 @@ def neural_program(model) -> Program:
 
 def program(model) -> Program:
     """The :class:`Program` of a :class:`polyjax.PolynomialBRDF` or a ``polyjax.data.NeuralBRDF``."""
-    from ..data._nbrdf import NeuralBRDF
-
     if isinstance(model, NeuralBRDF):
         return neural_program(model)
     if isinstance(model, PolynomialBRDF):

@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .._model import PolynomialBRDF
+from ..data._nbrdf import NeuralBRDF
 from ._expr import program
+from ._glsl_table import tabulated_glsl
 
 _HEADER = "// polyjax {what}: variables={variables}, basis={basis}, degree={degree}, interactions={interactions}"
 
@@ -32,7 +35,6 @@ def glsl(model, name: str = "BRDF") -> str:
         The source (GLSL 1.20 and later: scalar ``float`` arithmetic, ``sqrt``, ``max``).
     """
     if not _has_program(model):  # baseline fits and other BRDFs: a table (polyjax/export/_glsl_table.py)
-        from ._glsl_table import tabulated_glsl
 
         return tabulated_glsl(model, name)
     prog = program(model)
@@ -54,9 +56,6 @@ def glsl(model, name: str = "BRDF") -> str:
 
 def _has_program(model) -> bool:
     """Whether ``model`` has an expression program (a polynomial model or a neural BRDF), else it is tabulated."""
-    from .._model import PolynomialBRDF
-    from ..data._nbrdf import NeuralBRDF
-
     return isinstance(model, (PolynomialBRDF, NeuralBRDF))
 
 
@@ -76,8 +75,6 @@ def brdf_explorer(model, path: str | os.PathLike) -> Path:
 
 def numpy_function(model):
     """``f(u, v) -> (..., 3)`` in numpy, from the same program as :func:`glsl` (for checking exports)."""
-    import numpy as np
-
     fn = program(model).python_function("numpy")
 
     def f(u, v):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..render._brdf import rgb_brdf
+from ._merl import tabulate_merl
 
 #: the default table resolution (N_h, N_d, N_p): 8,192 nodes, 32,768 floats
 RESOLUTION = (16, 16, 32)
@@ -64,8 +65,6 @@ _BODY = """
 def table(model, resolution=RESOLUTION) -> np.ndarray:
     """``(4, N)``: ``max(f, 0)`` per channel at the nodes (file order), then 1 where both directions of the node are
     above the horizon (0 elsewhere, the values there 0)."""
-    from ._merl import tabulate_merl
-
     vals, above = tabulate_merl(rgb_brdf(model), tuple(resolution))
     vals = np.where(above[None], np.maximum(np.asarray(vals, np.float64), 0.0), 0.0)
     return np.concatenate([vals, above[None].astype(np.float64)])

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InputError
-from ._material_dict import check_material, material_of
+from ._material import check_material, material_of
 
 _CORE = {"baseColorFactor": "rgb", "metallicFactor": "unit", "roughnessFactor": "unit"}
 _SPECULAR = {"specularFactor": "unit", "specularColorFactor": "rgb+", "ior": "ior"}
@@ -50,7 +50,7 @@ def gltf(material, path, *, sphere: bool = True, segments: int = 64, rings: int 
         InputError: a bad suffix or folder, a missing, unknown or out-of-range material value.
     """
     path = _check_path(path, (".gltf", ".glb"))
-    mat = check_material(material_of(material), MODELS)
+    mat = check_material("gltf", material_of(material), MODELS)
     if not (isinstance(segments, int) and isinstance(rings, int) and segments >= 3 and rings >= 2):
         raise InputError(f"segments, rings: expected integers >= 3 and >= 2, found {segments!r}, {rings!r}")
     mesh = _uv_sphere(segments, rings, tangents=any(k in mat for k in _ANISOTROPY)) if sphere else None

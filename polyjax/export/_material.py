@@ -1,5 +1,6 @@
-"""Checks of the material dictionaries the standard-material exporters take (``{"model": ..., <input>: value}``, the
-form ``BaselineModel.to_material`` returns), and the atomic write they share."""
+"""The one check of the material dictionaries every standard-material exporter takes (``{"model": ..., <input>:
+value}``, the form ``BaselineModel.to_material`` returns), made before anything is written, and the atomic write
+they share."""
 
 from __future__ import annotations
 
@@ -8,61 +9,98 @@ import os
 from pathlib import Path
 from typing import Callable
 
+from .._config import check_output_file
 from .._errors import InputError
-from .._outputs import check_output_file
 
-#: ``(low, high)`` of an input; ``None`` for no upper limit.
-Range = tuple[float, "float | None"]
-
-
-def check_material(what: str, material, models: tuple[str, ...], scalars: dict[str, Range],
-                   colors: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
-    """``material`` checked: a dict whose ``"model"`` is one of ``models``, holding every input of ``scalars`` and
-    ``colors`` not in ``optional``, scalars finite and in their range, colours three finite values in ``[0, 1]``.
-
-    Returns:
-        ``{name: float or (r, g, b)}`` of the inputs present (``"model"`` left out).
-
-    Raises:
-        InputError: naming ``what`` (the exporter), the key and what was expected.
-    """
-    if not isinstance(material, dict):
-        raise InputError(f"{what}: expected a material dict (BaselineModel.to_material), "
-                         f"found {type(material).__name__}")
-    model = material.get("model")
-    if model not in models:
-        raise InputError(f"{what}: material['model'] = {model!r}: expected one of {list(models)}")
-    needed = [k for k in (*scalars, *colors) if k not in optional]
-    missing = [k for k in needed if k not in material]
-    if missing:
-        raise InputError(f"{what}: the material has no {missing[0]!r} (a {model} material needs {needed})")
-    out = {k: _scalar(what, k, material[k], lo, hi) for k, (lo, hi) in scalars.items() if k in material}
-    out.update({k: _color(what, k, material[k]) for k in colors if k in material})
-    unknown = sorted(set(material) - set(scalars) - set(colors) - {"model"})
-    if unknown:
-        raise InputError(f"{what}: unknown material inputs {unknown} for {model}")
-    return out
+#: a value's kind: "unit" (a float in [0, 1]), "nonnegative" (>= 0), "ior" (>= 1), "positive" (> 0), "real" (any
+#: finite float), "rgb" (three floats in [0, 1]), "rgb+" (three floats >= 0)
+Spec = dict[str, str]
+_RANGES = {"unit": "[0, 1]", "nonnegative": ">= 0", "ior": ">= 1", "positive": "> 0", "real": ""}
 
 
-def _scalar(what, key, value, lo, hi) -> float:
+def _holds(kind: str, x: float) -> bool:
+    return math.isfinite(x) and {"unit": 0.0 <= x <= 1.0, "nonnegative": x >= 0.0, "ior": x >= 1.0,
+                                 "positive": x > 0.0, "real": True}[kind]
+
+
+def _checked_value(what: str, key: str, value, kind: str):
+    """``value`` of the input ``key`` as a float (a list of three for a colour), checked against its ``kind``."""
+    if kind.startswith("rgb"):
+        each = "unit" if kind == "rgb" else "nonnegative"
+        try:
+            rgb = [float(x) for x in value]
+        except (TypeError, ValueError):
+            rgb = []
+        if len(rgb) != 3 or not all(_holds(each, x) for x in rgb):
+            raise InputError(f"{what}: material[{key!r}] = {value!r}: expected three values [r, g, b] "
+                             f"{'in [0, 1]' if kind == 'rgb' else '>= 0'}")
+        return rgb
     try:
         x = float(value)
     except (TypeError, ValueError):
         raise InputError(f"{what}: material[{key!r}] = {value!r}: expected a number") from None
-    if not math.isfinite(x) or x < lo or (hi is not None and x > hi):
-        rng = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
-        raise InputError(f"{what}: material[{key!r}] = {value!r}: expected a finite value {rng}")
+    if not _holds(kind, x):
+        raise InputError(f"{what}: material[{key!r}] = {value!r}: expected a finite value {_RANGES[kind]}".rstrip())
     return x
 
 
-def _color(what, key, value) -> tuple[float, float, float]:
-    try:
-        rgb = tuple(float(x) for x in value)
-    except (TypeError, ValueError):
-        rgb = ()
-    if len(rgb) != 3 or not all(math.isfinite(x) and 0.0 <= x <= 1.0 for x in rgb):
-        raise InputError(f"{what}: material[{key!r}] = {value!r}: expected three values [r, g, b] in [0, 1]")
-    return rgb
+def check_material(what: str, material, models: dict[str, tuple[Spec, tuple[str, ...]]]) -> dict:
+    """``material`` checked, the one check of every standard-material exporter: a dict whose ``"model"`` is a key of
+    ``models`` (``{model name: (the kind of every accepted input, the required inputs)}``), holding every required
+    input and no unknown one, each value of its kind.
+
+    Returns:
+        ``{"model": name, input: float or [r, g, b], ...}`` in the order of ``material``.
+
+    Raises:
+        InputError: naming ``what`` (the exporter), the input and what was expected.
+    """
+    if not isinstance(material, dict):
+        raise InputError(f"{what}: expected a material dict (BaselineModel.to_material), "
+                         f"found {type(material).__name__}")
+    name = material.get("model")
+    if name not in models:
+        raise InputError(f"{what}: material['model'] = {name!r}: expected one of {sorted(models)}")
+    spec, required = models[name]
+    missing = [k for k in required if k not in material]
+    if missing:
+        raise InputError(f"{what}: the material has no {missing[0]!r} (a {name} material needs {list(required)})")
+    unknown = sorted(k for k in material if k != "model" and k not in spec)
+    if unknown:
+        raise InputError(f"{what}: unknown material inputs {unknown} for {name}")
+    return {"model": name, **{k: _checked_value(what, k, v, spec[k]) for k, v in material.items() if k != "model"}}
+
+
+def range_kind(lo: float, hi: float | None) -> str:
+    """The kind of a scalar input with the range ``[lo, hi]`` (``hi`` None: no upper limit)."""
+    return {(0.0, 1.0): "unit", (0.0, None): "nonnegative", (1.0, None): "ior"}[(float(lo), hi if hi is None
+                                                                                   else float(hi))]
+
+
+def checked_inputs(what: str, material, models: tuple[str, ...], scalars: dict, colors: tuple[str, ...],
+                   optional: tuple[str, ...] = ()) -> dict:
+    """:func:`check_material` of a material whose models share one set of inputs: ``scalars`` (``{name: (low,
+    high)}``) and ``colors`` (three values in ``[0, 1]``), all required but ``optional``. Returns ``{name: float or
+    (r, g, b)}`` of the inputs present, scalars then colours (``"model"`` left out)."""
+    spec = {**{k: range_kind(lo, hi) for k, (lo, hi) in scalars.items()}, **{k: "rgb" for k in colors}}
+    required = tuple(k for k in spec if k not in optional)
+    out = check_material(what, material, {m: (spec, required) for m in models})
+    return {k: tuple(out[k]) if k in colors else out[k] for k in spec if k in out}
+
+
+def material_of(material) -> dict:
+    """The dictionary of ``material``: a dict, or an object whose ``material()`` returns one (a fit of one
+    material of a standard model, e.g. ``baselines.fit("gltf-pbr", ...)``)."""
+    if isinstance(material, dict):
+        return material
+    method = getattr(material, "material", None)
+    if callable(method):
+        out = method()
+        if isinstance(out, dict):
+            return out
+    raise InputError(f"material: expected a standard material dict (see baselines.standard_material) or a fit with "
+                     f"a material() method, found {type(material).__name__}")
+
 
 
 def output_path(what: str, path, suffix: str) -> Path:

@@ -22,7 +22,7 @@ import os
 from pathlib import Path
 
 from .._errors import InputError
-from ._material import check_material, format_float, output_path, write_atomically
+from ._material import checked_inputs, format_float, output_path, write_atomically
 
 _WHAT = "materialx"
 #: OpenPBR inputs written, with their ranges (``ND_open_pbr_surface_surfaceshader``'s ``uimin``/``uimax``).
@@ -39,19 +39,19 @@ MODELS = ("openpbr", "openpbr-anisotropic", "openpbr-coat")
 
 def _import_materialx():
     try:
-        import MaterialX as mx
+        import MaterialX as mx  # optional (the "materialx" extra): imported where used
     except ImportError:
         raise ImportError("pj.export.materialx needs the MaterialX package: pip install 'polyjax[materialx]'") from None
     return mx
 
 
 def check_openpbr(material, what: str = _WHAT) -> dict:
-    """The OpenPBR inputs of ``material`` checked (:func:`check_material`), coat defaults filled in when a coat is
-    given."""
+    """The OpenPBR inputs of ``material`` checked (:func:`polyjax.export._material.check_material`), coat defaults
+    filled in when a coat is given."""
     if isinstance(material, dict) and str(material.get("model", "")).startswith("usd-preview"):
         raise InputError(f"{what}: a {material['model']!r} material is a UsdPreviewSurface: it has no exact OpenPBR "
                          "form; write it with pj.export.usd, or fit 'openpbr' for MaterialX")
-    p = check_material(what, material, MODELS, SCALARS, COLORS, OPTIONAL)
+    p = checked_inputs(what, material, MODELS, SCALARS, COLORS, OPTIONAL)
     if any(k in p for k in OPTIONAL):
         p = {"coat_weight": 0.0, "coat_color": (1.0, 1.0, 1.0), "coat_roughness": 0.0, "coat_ior": 1.6,
              "coat_darkening": 1.0, **p}

@@ -28,15 +28,18 @@ import numpy as np
 
 from .._errors import InputError
 from .._model import PolynomialBRDF
+from ..data._merl import MERL_RESOLUTION
+from ..data._nbrdf import NeuralBRDF
 from ..render._brdf import rgb_brdf
 from ..render._sampling import ImportanceSampler, importance_sampler
 from ._expr import program
+from ._merl import tabulate_merl
 
 
 def _mitsuba():
     try:
-        import drjit as dr
-        import mitsuba as mi
+        import drjit as dr  # optional (the "mitsuba" extra): imported where used
+        import mitsuba as mi  # optional (the "mitsuba" extra)
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise InputError("mitsuba_bsdf: the optional package 'mitsuba' is not installed (pip install mitsuba)") from e
     if mi.variant() is None:
@@ -96,9 +99,6 @@ def _tabulated_eval(mi, dr, brdf):
     ``sum_c w_c m_c f_c / sum_c w_c m_c`` over the 8 corners, ``w`` the trilinear weights and ``m`` 1 where both
     directions of the node are above the horizon (``f`` is then ``max(f, 0)`` there) and 0 elsewhere.
     """
-    from ..data._merl import MERL_RESOLUTION
-    from ._merl import tabulate_merl
-
     nh, nd, npd = MERL_RESOLUTION
     vals, above = tabulate_merl(brdf)
     vals = np.where(above[None], np.asarray(vals, np.float64), 0.0)
@@ -280,7 +280,6 @@ def register_mitsuba_bsdf(model, name: str = "polyjax", **sampler_options) -> st
             ``alpha``, ...).
     """
     mi, dr = _mitsuba()
-    from ..data._nbrdf import NeuralBRDF
 
     if isinstance(model, (PolynomialBRDF, NeuralBRDF)):
         evaluate = program(model).python_function("drjit")

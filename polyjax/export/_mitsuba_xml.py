@@ -8,8 +8,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._errors import InputError
+from ..render._scene import DirectionalLight, PointLight, Sphere
 from ._gltf import _check_path, _write_atomic
-from ._material_dict import check_material, material_of
+from ._material import check_material, material_of
 
 _PRINCIPLED = {k: "unit" for k in ("roughness", "metallic", "specular", "spec_tint", "anisotropic", "sheen",
                                    "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans", "flatness")}
@@ -48,7 +49,7 @@ def mitsuba_xml(material, path, *, scene=None, material_id: str = "material"):
     path = _check_path(path, (".xml",))
     mat = material_of(material)
     distribution = _distribution(mat)
-    mat = check_material({k: x for k, x in mat.items() if k != "distribution"}, MODELS)
+    mat = check_material("mitsuba_xml", {k: x for k, x in mat.items() if k != "distribution"}, MODELS)
     bsdf = _bsdf_xml(mat, material_id, distribution)
     body = [bsdf] if scene is None else [bsdf] + _scene_xml(scene, material_id)
     text = '<?xml version="1.0" encoding="utf-8"?>\n<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
@@ -88,8 +89,6 @@ def _vec(x) -> str:
 
 def _scene_xml(scene, material_id: str) -> list[str]:
     """The shapes, emitters, sensor and integrator of a polyjax scene (``mitsuba_scene_dict``'s conventions)."""
-    from ..render._scene import DirectionalLight, PointLight, Sphere
-
     cam = scene.camera
     if float(cam.ortho_height) > 0:
         raise InputError("scene: expected a perspective camera (ortho_height = 0) for Mitsuba")

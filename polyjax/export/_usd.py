@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 
 from .._errors import InputError
-from ._material import check_material, output_path, write_atomically
+from ._material import checked_inputs, output_path, write_atomically
 
 _WHAT = "usd"
 SCALARS = {"useSpecularWorkflow": (0.0, 1.0), "metallic": (0.0, 1.0), "roughness": (0.0, 1.0), "ior": (1.0, None),
@@ -30,7 +30,7 @@ MODELS = ("usd-preview", "usd-preview-specular", "usd-preview-clearcoat")
 
 def _import_pxr():
     try:
-        from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
+        from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade  # optional (the "usd" extra): imported where used
     except ImportError:
         raise ImportError("pj.export.usd needs the usd-core package: pip install 'polyjax[usd]'") from None
     return Gf, Sdf, Usd, UsdGeom, UsdShade
@@ -41,7 +41,7 @@ def check_usd_preview(material, what: str = _WHAT) -> dict:
     if isinstance(material, dict) and str(material.get("model", "")).startswith("openpbr"):
         raise InputError(f"{what}: a {material['model']!r} material is an OpenPBR Surface: it has no exact "
                          "UsdPreviewSurface form; write it with pj.export.materialx, or fit 'usd-preview' for USD")
-    p = check_material(what, material, MODELS, SCALARS, COLORS, OPTIONAL)
+    p = checked_inputs(what, material, MODELS, SCALARS, COLORS, OPTIONAL)
     if p["useSpecularWorkflow"] not in (0.0, 1.0):
         raise InputError(f"{what}: material['useSpecularWorkflow'] = {material['useSpecularWorkflow']!r}: "
                          "expected 0 or 1")

@@ -2,7 +2,7 @@
 
 Every BRDF the renderer accepts is a callable taking the light direction ``u`` and the view
 direction ``v`` as ``(..., 3)`` unit vectors in the local shading frame (normal ``+z``, see
-:mod:`polyjax._geometry`) and returning ``(..., 3)`` RGB values (or ``(...)`` grey values,
+:mod:`polyjax._directions`) and returning ``(..., 3)`` RGB values (or ``(...)`` grey values,
 broadcast to the three channels). Fitted models, measured data and analytic BRDFs are all
 wrapped into this one protocol by :func:`rgb_brdf`.
 
@@ -21,8 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import is_traced
+from .._directions import reflect, safe_normalize
 from .._errors import InputError
-from .._geometry import reflect, safe_normalize
 from .._model import PolynomialBRDF
 
 BRDF = Callable[[Array, Array], Array]
@@ -231,7 +232,7 @@ class TabulatedBRDF(eqx.Module):
         isotropic: use the rotation-invariant parametrisation.
         eps: regulariser of the weights (squared feature distance).
         """
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((u, v, values))):
+        if is_traced(u, v, values):
             self._init_traced(u, v, values, k, isotropic, eps)
             return
         u = np.asarray(u, dtype=float)

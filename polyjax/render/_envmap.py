@@ -22,7 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import is_traced
 from .._errors import InputError
+from ._image import read_exr
 
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -45,7 +47,7 @@ class EnvironmentLight(eqx.Module):
         image: ``(H, W, 3)`` latitude-longitude radiance map (non-negative, finite).
         scale: multiplies the radiance.
         """
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((image, scale))):
+        if is_traced(image, scale):
             self._init_traced(image, scale)
             return
         img = np.asarray(image, dtype=float)
@@ -134,7 +136,7 @@ def sample_pool(env: EnvironmentLight, n: int, seed: int = 0) -> tuple[np.ndarra
     """
     d, k, inv_pdf = pool_indices(env, n, seed)
     img = jnp.asarray(env.image).reshape(-1, 3)
-    if isinstance(k, np.ndarray) and not isinstance(env.image, jax.core.Tracer):
+    if isinstance(k, np.ndarray) and not is_traced(env.image):
         return d, np.asarray(img, dtype=np.float64)[k] * inv_pdf[:, None]
     return d, img[k] * inv_pdf[:, None]
 
@@ -159,7 +161,7 @@ def pool_indices(env: EnvironmentLight, n: int, seed: int = 0):
         ``(d, k, 1 / pdf)``: ``(n, 3)`` directions, ``(n,)`` flat pixel indices, ``(n,)`` inverse densities.
     """
     h, w, _ = env.image.shape
-    if isinstance(env.pmf, jax.core.Tracer):
+    if is_traced(env.pmf):
         return _pool_traced(env, n, seed)
     x0, perm, ri, rj = _pool_uniforms(n, seed)
     pmf = np.asarray(env.pmf, dtype=np.float64)
@@ -207,8 +209,6 @@ def _pool_traced(env: EnvironmentLight, n: int, seed: int):
 
 def load_envmap(path: str | os.PathLike, scale: float = 1.0) -> EnvironmentLight:
     """Read a latitude-longitude environment map from an OpenEXR file (linear RGB)."""
-    from ._image import read_exr
-
     return EnvironmentLight(read_exr(path), scale)
 
 

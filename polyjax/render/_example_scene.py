@@ -12,6 +12,13 @@ import json
 import os
 from pathlib import Path
 
+import jax.numpy as jnp
+
+from ._brdf import Phong
+from ._image import write_exr
+from ._integrator import render
+from ._scene import Camera, PointLight, Scene, Sphere
+
 #: the three point lights of the example: position (x, y, z) and intensity
 LIGHTS = (((3.0, 2.0, 4.0), 30.0), ((-3.0, 1.0, 3.0), 30.0), ((0.0, -3.0, 4.0), 30.0))
 
@@ -26,10 +33,6 @@ def write_example_scene(folder: str | os.PathLike, size: int = 64) -> Path:
     Returns:
         The path of ``scene.json``.
     """
-    import jax.numpy as jnp
-
-    from . import Camera, Phong, PointLight, Scene, Sphere, render, write_exr
-
     folder = Path(folder)
     camera = {"eye": [0.0, 0.0, 5.0], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0], "fov_deg": 30.0,
               "width": int(size), "height": int(size)}

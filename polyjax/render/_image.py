@@ -6,8 +6,11 @@ import os
 from pathlib import Path
 from typing import Sequence
 
+import matplotlib.image
 import numpy as np
+import OpenEXR
 from jaxtyping import ArrayLike
+from matplotlib.figure import Figure
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._metrics import psnr
@@ -28,8 +31,6 @@ def write_exr(path: str | os.PathLike, image: ArrayLike) -> Path:
     Returns:
         The path written.
     """
-    import OpenEXR
-
     rgb = np.ascontiguousarray(_as_rgb(image), dtype=np.float32)
     path = Path(path)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
@@ -47,8 +48,6 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
         DataNotFoundError: the file does not exist.
         DataFormatError: the file is not a readable EXR with RGB or Y channels.
     """
-    import OpenEXR
-
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"EXR file {str(path)!r} does not exist")
@@ -85,8 +84,6 @@ def to_srgb(image: ArrayLike, exposure: float = 0.0, tonemap: str = "clip") -> n
 def write_png(path: str | os.PathLike, image: ArrayLike, exposure: float = 0.0, tonemap: str = "clip",
               srgb: bool = True) -> Path:
     """Write a preview PNG: tone-mapped sRGB (``srgb=True``) or an image already in ``[0, 1]`` display values."""
-    import matplotlib.image
-
     disp = to_srgb(image, exposure, tonemap) if srgb else np.clip(_as_rgb(image), 0.0, 1.0)
     path = Path(path)
     matplotlib.image.imsave(str(path), (np.round(disp * 255)).astype(np.uint8))
@@ -144,11 +141,6 @@ def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Seq
     Returns:
         ``{name: psnr_dB}``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     if len(names) != len(images):
         raise InputError(f"names: expected {len(images)} names (one per image), found {len(names)}")
     ref_d = to_srgb(reference, exposure, tonemap)
@@ -157,7 +149,8 @@ def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Seq
     m = None if mask is None else np.asarray(mask)[..., None]
     scores = {n: float(psnr(d, ref_d, peak=1.0, mask=m)) for n, d in zip(names, disp)}
     k = len(images) + 1
-    fig, ax = plt.subplots(2, k, figsize=(2.2 * k, 4.6), squeeze=False)
+    fig = Figure(figsize=(2.2 * k, 4.6))  # no pyplot: no global backend or figure manager
+    ax = fig.subplots(2, k, squeeze=False)
     ax[0, 0].imshow(ref_d)
     ax[0, 0].set_title(reference_name, fontsize=9)
     ax[1, 0].text(0.5, 0.5, f"|difference|\nscale 0..{scale:.3g}", ha="center", va="center", fontsize=8)
@@ -169,7 +162,6 @@ def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Seq
         a.set_axis_off()
     fig.tight_layout()
     fig.savefig(str(path), dpi=100)
-    plt.close(fig)
     return scores
 
 

@@ -53,6 +53,7 @@ from .._arrays import cast_concrete
 from .._errors import InputError
 from ._brdf import evaluate_rgb
 from ._envmap import EnvironmentLight, pool_indices
+from ._sampling import cosine_pdf, cosine_sample, importance_sampler
 from ._scene import DirectionalLight, Effects, NormalMap, Scene, Sphere, plan_effects
 
 _ENV_KEY, _INDIRECT_KEY = 0x2545F491, 0x9E3779B9
@@ -442,8 +443,6 @@ def _from_local(frame, loc):
 
 def _sampled_direction(samplers, idx, xi, vl):
     """Local light directions and their densities from the sampler of the object hit (``None``: cosine)."""
-    from ._sampling import cosine_pdf, cosine_sample
-
     if samplers is None:
         u = cosine_sample(xi[..., 3:5])
         return u, cosine_pdf(u)
@@ -526,8 +525,6 @@ def _env_sampled(scene: Scene, g, pool, seed, spp: int, sampling: str, shadows: 
     """The environment term with BRDF sampling: ``"mis"`` splits ``spp`` into ``spp // 2`` environment and
     ``spp - spp // 2`` BRDF samples, ``"brdf"`` and ``"cosine"`` draw all ``spp`` from the BRDF's importance
     sampler or cosine-weighted (see :func:`_env_mis_sum`)."""
-    from ._sampling import importance_sampler
-
     samplers = None
     if sampling in ("mis", "brdf"):
         samplers = tuple(importance_sampler(obj.brdf, dtype=dtype) for obj in scene.objects)
@@ -566,8 +563,6 @@ def _stage_indirect_sampled(scene: Scene, g, pool, samplers, seed, spp: int, bou
 
 def _indirect_with_sampler(scene: Scene, g, pool, seed, spp: int, bounces: int, effects: Effects, dtype):
     """Indirect light with BRDF-sampled bounces (``sampling="mis"`` or ``"brdf"``)."""
-    from ._sampling import importance_sampler
-
     samplers = tuple(importance_sampler(obj.brdf, dtype=dtype) for obj in scene.objects)
     return _stage_indirect_sampled(scene, g, pool, samplers, seed, spp, bounces, effects)
 

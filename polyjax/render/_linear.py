@@ -21,6 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from .._errors import InputError
+from ._brdf import evaluate_rgb
 from ._integrator import (
     _ENV_KEY,
     _dot,
@@ -132,8 +133,6 @@ def _light_samples(scene, pool, target, spp, seed, shadows):
 
 def render_linear(samples: LightSamples, brdf) -> Float[Array, "n 3"]:
     """``sum_j c_j f(u_j, v)`` per pixel (0 off the target): the render of ``brdf`` from :func:`light_samples`."""
-    from ._brdf import evaluate_rgb
-
     f = evaluate_rgb(brdf, samples.u, samples.v[:, None, :])
     out = jnp.sum(samples.weight * f, axis=1)
     return jnp.where(samples.on_target[:, None], out, 0.0)

@@ -63,7 +63,7 @@ def mitsuba_scene_dict(scene: Scene, bsdf: dict, *, pixel_centres: bool = True, 
                                    "irradiance": {"type": "rgb", "value": np.asarray(light.irradiance, float).tolist()}}
         elif isinstance(light, EnvironmentLight):
             raise InputError(f"scene.lights[{i}]: environment maps are not converted to Mitsuba")
-    import mitsuba as mi
+    import mitsuba as mi  # optional (the "mitsuba" extra): imported where used
 
     sampler = ({"type": "stratified", "sample_count": 1, "jitter": False} if pixel_centres
                else {"type": "independent", "sample_count": int(spp)})
@@ -82,7 +82,7 @@ def mitsuba_scene_dict(scene: Scene, bsdf: dict, *, pixel_centres: bool = True, 
 
 def render_mitsuba(scene: Scene, bsdf: dict, *, variant: str = "scalar_rgb", seed: int = 0, **options) -> np.ndarray:
     """Render a polyjax scene with Mitsuba 3 (:func:`mitsuba_scene_dict`): ``(H, W, 3)`` linear RGB, float64."""
-    import mitsuba as mi
+    import mitsuba as mi  # optional (the "mitsuba" extra): imported where used
 
     mi.set_variant(variant)
     return np.asarray(mi.render(mi.load_dict(mitsuba_scene_dict(scene, bsdf, **options)), seed=seed), dtype=np.float64)
@@ -157,7 +157,7 @@ def _fresnel(cos_i, eta):
 
 def mitsuba_bsdf_eval(bsdf: dict, u, v, variant: str = "scalar_rgb") -> np.ndarray:
     """Mitsuba's own BRDF ``f(u, v)`` (its ``eval`` divided by ``cos theta_u``) at local directions ``(n, 3)``."""
-    import mitsuba as mi
+    import mitsuba as mi  # optional (the "mitsuba" extra): imported where used
 
     mi.set_variant(variant)
     b = mi.load_dict(dict(bsdf))

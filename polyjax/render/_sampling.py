@@ -58,7 +58,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from .._errors import InputError
-from .._threads import one_lapack_thread
+from .._solve.threads import one_lapack_thread
 from ._brdf import evaluate_rgb, rgb_brdf
 
 _QUARTER_PI = 0.25 * np.pi

@@ -20,13 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._arrays import is_traced
 from .._errors import InputError
 from ._brdf import BRDF, rgb_brdf
-
-
-def _traced(*xs) -> bool:
-    """True when any leaf of ``xs`` is a JAX tracer (the object is being built inside ``jit``/``grad``/``vmap``)."""
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(xs))
+from ._envmap import EnvironmentLight
 
 
 def _float(x) -> Array:
@@ -43,7 +40,7 @@ def _vec3(x, name) -> Array:
 def _np3(x, name):
     """A 3-vector (a scalar is repeated). Concrete values are checked for shape and finiteness; traced values
     (inside ``jit``/``grad``) are checked for shape only and kept as they are, so that they stay differentiable."""
-    if _traced(x):
+    if is_traced(x):
         a = _float(jnp.stack([_float(c) for c in x]) if isinstance(x, (list, tuple)) else x)
         if a.shape == ():
             a = jnp.broadcast_to(a, (3,))
@@ -81,14 +78,14 @@ class Camera(eqx.Module):
                  ortho_height: float = 0.0):
         if int(width) < 1 or int(height) < 1:
             raise InputError(f"width, height: expected positive pixel counts, found {width} x {height}")
-        if not _traced(fov_deg) and not 0.0 < float(fov_deg) < 180.0:
+        if not is_traced(fov_deg) and not 0.0 < float(fov_deg) < 180.0:
             raise InputError(f"fov_deg: expected a field of view in (0, 180) degrees, found {fov_deg}")
         eye, target, up = _np3(eye, "eye"), _np3(target, "target"), _np3(up, "up")
-        if not _traced(eye, target, up) and np.linalg.norm(np.cross(target - eye, up)) < 1e-9:
+        if not is_traced(eye, target, up) and np.linalg.norm(np.cross(target - eye, up)) < 1e-9:
             raise InputError("up: expected a direction not parallel to the viewing direction target - eye")
         self.eye, self.target, self.up = jnp.asarray(eye), jnp.asarray(target), jnp.asarray(up)
-        self.fov_deg = _float(fov_deg) if _traced(fov_deg) else jnp.asarray(float(fov_deg))
-        self.ortho_height = _float(ortho_height) if _traced(ortho_height) else jnp.asarray(float(ortho_height))
+        self.fov_deg = _float(fov_deg) if is_traced(fov_deg) else jnp.asarray(float(fov_deg))
+        self.ortho_height = _float(ortho_height) if is_traced(ortho_height) else jnp.asarray(float(ortho_height))
         self.width = int(width)
         self.height = int(height)
 
@@ -121,10 +118,10 @@ class Sphere(eqx.Module):
     brdf: BRDF
 
     def __init__(self, brdf, center: ArrayLike = (0.0, 0.0, 0.0), radius: float = 1.0):
-        if not _traced(radius) and not float(radius) > 0:
+        if not is_traced(radius) and not float(radius) > 0:
             raise InputError(f"radius: expected a positive radius, found {radius}")
         self.center = _vec3(center, "center")
-        self.radius = _float(radius) if _traced(radius) else jnp.asarray(float(radius))
+        self.radius = _float(radius) if is_traced(radius) else jnp.asarray(float(radius))
         self.brdf = rgb_brdf(brdf)
 
 
@@ -138,7 +135,7 @@ class Plane(eqx.Module):
 
     def __init__(self, brdf, height: float = -1.0, normal: ArrayLike = (0.0, 1.0, 0.0),
                  tangent: ArrayLike = (1.0, 0.0, 0.0)):
-        if _traced(normal, tangent, height):
+        if is_traced(normal, tangent, height):
             n = _vec3(normal, "normal")
             n = n / jnp.linalg.norm(n)
             t = _vec3(tangent, "tangent")
@@ -180,14 +177,14 @@ class NormalMap(eqx.Module):
     brdf: BRDF
 
     def __init__(self, brdf, normals: ArrayLike, mask: ArrayLike | None = None):
-        n = normals if _traced(normals) else np.asarray(normals, dtype=float)
+        n = normals if is_traced(normals) else np.asarray(normals, dtype=float)
         if n.ndim != 3 or n.shape[-1] != 3:
             raise InputError(f"normals: expected an (H, W, 3) normal map, found shape {tuple(n.shape)}")
         m = np.ones(n.shape[:2], bool) if mask is None else np.asarray(mask)
         if m.shape != n.shape[:2]:
             raise InputError(f"mask: expected shape {tuple(n.shape[:2])} (the normal map's), found {m.shape}")
         m = m.astype(bool)
-        if not _traced(n):
+        if not is_traced(n):
             length = np.linalg.norm(n, axis=-1)
             bad = m & ~(np.abs(length - 1.0) <= 1e-3)
             if np.any(bad):
@@ -195,7 +192,7 @@ class NormalMap(eqx.Module):
                 raise InputError(f"normals: expected unit normals where the mask is set; {int(bad.sum())} are not "
                                  f"(pixel ({i}, {j}) has length {length[i, j]:.6g})")
             n = np.where(m[..., None], n, np.array([0.0, 0.0, 1.0]))
-        self.normals = n if _traced(n) else jnp.asarray(n)
+        self.normals = n if is_traced(n) else jnp.asarray(n)
         self.mask = jnp.asarray(m)
         self.brdf = rgb_brdf(brdf)
 
@@ -213,7 +210,7 @@ class DirectionalLight(eqx.Module):
     irradiance: Float[Array, "3"]
 
     def __init__(self, direction: ArrayLike = (0.0, 0.0, 1.0), irradiance: ArrayLike = 1.0):
-        if _traced(direction):  # normalised in JAX; the derivative of d / |d| flows back to ``direction``
+        if is_traced(direction):  # normalised in JAX; the derivative of d / |d| flows back to ``direction``
             d = _vec3(direction, "direction")
             self.direction = d / jnp.linalg.norm(d)
             self.irradiance = _vec3(irradiance, "irradiance")
@@ -255,8 +252,6 @@ class Scene(eqx.Module):
     max_bounces: int = eqx.field(static=True)
 
     def __init__(self, camera: Camera, objects, lights, background: ArrayLike = 0.0, max_bounces: int = 0):
-        from ._envmap import EnvironmentLight
-
         objects = tuple(objects) if isinstance(objects, (list, tuple)) else (objects,)
         lights = tuple(lights) if isinstance(lights, (list, tuple)) else (lights,)
         if not isinstance(camera, Camera):
@@ -286,8 +281,6 @@ class Scene(eqx.Module):
     @property
     def environment(self):
         """The scene's :class:`EnvironmentLight`, or None."""
-        from ._envmap import EnvironmentLight
-
         envs = [li for li in self.lights if isinstance(li, EnvironmentLight)]
         return envs[0] if envs else None
 
@@ -309,7 +302,7 @@ def _check_normal_map(camera: Camera, objects: tuple) -> None:
     if (camera.height, camera.width) != (h, w):
         raise InputError(f"camera: expected {w} x {h} pixels (the NormalMap's), found {camera.width} x "
                          f"{camera.height}")
-    if not _traced(camera.ortho_height) and not float(camera.ortho_height) > 0:
+    if not is_traced(camera.ortho_height) and not float(camera.ortho_height) > 0:
         raise InputError("camera: a NormalMap is seen by an orthographic camera (ortho_height > 0)")
 
 

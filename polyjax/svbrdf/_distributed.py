@@ -11,6 +11,7 @@ start-up and the scalar summaries.
 
 from __future__ import annotations
 
+import socket
 from typing import Callable
 
 import jax
@@ -19,7 +20,7 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from .._errors import InputError
-from .._fit import fit_polynomial
+from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
 
 #: the mesh axis of the texel rows
@@ -89,8 +90,6 @@ def fit_rows_distributed(load_rows: Callable[[int, int], dict], height: int, var
 
 def free_port() -> int:
     """A free TCP port on localhost (for a coordinator address in tests and examples)."""
-    import socket
-
     with socket.socket() as s:
         s.bind(("localhost", 0))
         return s.getsockname()[1]

@@ -28,6 +28,7 @@ import itertools
 import os
 
 import numpy as np
+import OpenEXR
 
 from .._errors import DataFormatError, InputError
 
@@ -93,8 +94,6 @@ def write_exr_shard(path: str | os.PathLike, fields: dict[str, np.ndarray], layo
     """Write ``fields`` (each ``(h, W, *per_texel)``) as one scanline EXR (ZIP compression) with ``layouts``.
 
     The header carries ``polyjaxRows`` (``"a b"``: the texture rows of the shard)."""
-    import OpenEXR
-
     channels = {}
     for name, a in fields.items():
         channels.update(_encode(name, np.asarray(a), layouts[name]))
@@ -110,8 +109,6 @@ def read_exr_shard(path: str | os.PathLike, fields: dict[str, dict], rows: int) 
 
     Raises :class:`polyjax.DataFormatError` when the file is unreadable or a channel is missing or mis-sized.
     """
-    import OpenEXR
-
     try:
         with OpenEXR.File(str(path), separate_channels=True) as f:
             pix = {k: np.asarray(c.pixels) for k, c in f.channels().items()}

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from .._fit import LANE_BLOCK, fit_polynomial
+import jax
+
+from .._fit.closed_form import LANE_BLOCK
+from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
-from .._threads import one_lapack_thread
+from .._solve.threads import one_lapack_thread
 from ._capture import Capture
 
 
@@ -31,8 +34,6 @@ def fit_capture(capture: Capture, variables: str = "lafortune", degree: int = 3,
     """
     u, v, b, w = capture.observations()
     if sharding is not None:
-        import jax
-
         u, v, b, w = (jax.device_put(a, sharding) for a in (u, v, b, w))
     return fit_polynomial(u, v, b, variables, degree, weights=w, cutoff_deg=cutoff_deg, lane_block=lane_block,
                           **options)

@@ -22,7 +22,7 @@ import base64
 
 import numpy as np
 
-from .._capture import Capture
+from ..inverse._capture import Capture
 from .._errors import InputError
 from ._items import ViewItem
 

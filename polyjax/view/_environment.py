@@ -19,6 +19,7 @@ import base64
 import numpy as np
 
 from .._errors import InputError
+from ..render import load_envmap, procedural_sky
 
 #: the texels (rows, columns) of the page's map: 512 BRDF evaluations per pixel
 SHAPE = (16, 32)
@@ -29,8 +30,6 @@ def environment_map(env) -> np.ndarray:
     16 x 32 (averaged down by solid angle), ``"sky"`` (:func:`polyjax.render.procedural_sky` at 64 x 128) or an
     OpenEXR path (:func:`polyjax.render.load_envmap`)."""
     if isinstance(env, str):
-        from ..render import load_envmap, procedural_sky
-
         env = procedural_sky() if env == "sky" else load_envmap(env)
     img = np.asarray(getattr(env, "image", env), np.float64)
     h, w = SHAPE

@@ -22,9 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InputError
+from .._errors import DataNotFoundError, InputError
+from .._io import load_model
 from .._measurements import Measurements
 from .._model import PolynomialBRDF
+from ..data._load import load
+from ..data._merl import directions_to_rusinkiewicz, merl_index
+from ..data._nbrdf import NeuralBRDF
+from ..export._expr import program
+from ..export._merl import tabulate_merl
 
 #: the MERL grid (theta_h, theta_d, phi_d bins), the default resolution of tables
 MERL_RESOLUTION = (90, 90, 180)
@@ -130,9 +136,6 @@ def _with_fit_time(info: dict, text: str) -> dict:
 def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | None = None) -> list[ViewItem]:
     """The items of a fitted model: programs for what the expression builder covers, tables otherwise; each with
     the fit time of ``metadata`` (the model file's, :func:`fit_time`)."""
-    from ..data._nbrdf import NeuralBRDF
-    from ..export._expr import program
-
     items = []
     lanes = _lanes(model, name)
     text, seconds = fit_time(metadata)
@@ -156,8 +159,6 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | N
 
 
 def _tabulated(model, name: str, resolution, info=None, why="no GLSL expression for this model") -> ViewItem:
-    from ..export._merl import tabulate_merl
-
     values, _ = tabulate_merl(model, resolution)
     table = np.asarray(values, np.float32).T.reshape(*resolution, 3)
     if info is None:
@@ -177,8 +178,6 @@ def _rgb(values: np.ndarray) -> np.ndarray:
 
 def _binned(u, v, rgb, valid, resolution):
     """``(table (N_h, N_d, N_p, 3), filled fraction)``: the mean of the valid samples in each MERL bin."""
-    from ..data._merl import directions_to_rusinkiewicz, merl_index
-
     th, td, pd = directions_to_rusinkiewicz(u, v)
     idx = merl_index(th, td, pd, resolution)[valid]
     n = int(np.prod(resolution))
@@ -215,63 +214,4 @@ def data_items(data: Measurements, name: str, resolution=MERL_RESOLUTION) -> lis
             info["shown as"] = "points: scattered samples (a table would be mostly empty)"
             items.append(ViewItem(label, "points", info, u=u[valid].astype(np.float32),
                                   v=v[valid].astype(np.float32), values=rgb[valid].astype(np.float32), model=data))
-    return items
-
-
-def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION, lights=None) -> list[ViewItem]:
-    """The items of one command-line argument: a saved model file (``.npz``/``.json``, ``FILE#i`` for lane ``i``),
-    a photometric capture's folder in DiLiGenT's layout (:func:`polyjax.data.load_photometric` of its ``lights``,
-    None: all; :mod:`polyjax.view._capture`) or a data set spec of :func:`polyjax.data.load` (``curet:25``,
-    ``merl-nbrdf:green-latex``, ``cornell:cayman``, ``merl:<file>``, ``rgl:<file>``: :mod:`polyjax.view._rgl`)."""
-    import polyjax as pj
-
-    from ._capture import capture_items
-    from ._rgl import rgl_items
-
-    if Path(arg).is_dir():
-        return capture_items(pj.data.load_photometric(arg, lights), Path(arg).name, source=f"capture {arg}")
-    if arg.strip().lower().startswith("rgl:"):
-        return rgl_items(arg, root, resolution)
-    path, sep, index = arg.rpartition("#")
-    path = path if sep else arg
-    if Path(path).suffix.lower() in (".npz", ".json"):
-        if not Path(path).is_file():
-            raise pj.DataNotFoundError(f"{path!r}: no such model file")
-        model = pj.load_model(path)
-        if sep:
-            try:
-                model = model[int(index)]
-            except (ValueError, IndexError, TypeError) as e:
-                raise InputError(f"{arg!r}: expected FILE#i with i a lane of the model's batch shape "
-                                 f"{getattr(model, 'batch_shape', ())}") from e
-        return model_items(model, Path(path).stem + (f"[{index}]" if sep else ""), resolution,
-                           pj.model_metadata(path))
-    if ":" not in arg:
-        raise InputError(f"{arg!r}: expected a saved model (.npz or .json), a capture's folder or a data set spec "
-                         "such as curet:25, merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>, "
-                         "rgl:<file.bsdf>")
-    return data_items(pj.data.load(arg, root=root), arg, resolution)
-
-
-def as_items(objects, resolution=MERL_RESOLUTION, root=None, lights=None) -> list[ViewItem]:
-    """Items from a mix of :class:`ViewItem`, models, :class:`polyjax.Measurements`, :class:`polyjax.Capture`,
-    ``(name, object)`` pairs and command-line strings (``lights``: of the capture folders among them)."""
-    from .._capture import Capture
-    from ._capture import capture_items
-
-    items = []
-    for i, obj in enumerate(objects):
-        name, obj = obj if isinstance(obj, tuple) and len(obj) == 2 and isinstance(obj[0], str) else (None, obj)
-        if isinstance(obj, ViewItem):
-            items.append(obj)
-        elif isinstance(obj, (str, Path)):
-            items.extend(items_from_argument(str(obj), root, resolution, lights))
-        elif isinstance(obj, Capture):
-            items.extend(capture_items(obj, name or f"capture {i}"))
-        elif isinstance(obj, Measurements):
-            items.extend(data_items(obj, name or (obj.names[0] if len(obj.names) == 1 else f"data {i}"), resolution))
-        else:
-            items.extend(model_items(obj, name or f"{type(obj).__name__} {i}", resolution))
-    if not items:
-        raise InputError("items: expected at least one fit or data set to show")
     return items

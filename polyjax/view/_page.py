@@ -22,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .._config import check_output_file
 from .._errors import InputError
 from ._capture import capture_json
 from ._environment import environment_json
 from ._glsl import brdf_functions
-from ._items import MERL_RESOLUTION, ViewItem, as_items
+from ._items import MERL_RESOLUTION, ViewItem
+from ._sources import as_items
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,8 +123,6 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
 
     The text is built completely before the file is opened (no half-written page). Returns the path written.
     """
-    from .._outputs import check_output_file
-
     path = check_output_file(path, "out")
     _check_settings(settings)  # before the items' work
     text = page_html(as_items(objects, resolution, root, lights), settings)

@@ -1,0 +1,119 @@
+"""Argument helpers every command shares: the options of every command (data root, cache), degrees, dataset specs,
+the samples a fit keeps, the image options of ``render`` and ``view``, strict JSON output."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import numpy as np
+
+import polyjax as pj
+
+from .._basis import n_terms
+from .._config import configured_data_root
+from .._errors import InputError
+from .._variables import get_variables
+
+#: the built-in variable sets (pj.variable_sets() without importing JAX to print --help)
+BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-shirley", "rusinkiewicz",
+                     "rusinkiewicz-phid")
+
+
+ROOT_HELP = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
+             "a folder given that does not exist is an error")
+CACHE_HELP = ("folder of JAX's persistent compilation cache, which lets later runs skip compiling (default: "
+              "$POLYJAX_CACHE, else $XDG_CACHE_HOME/polyjax/jax or ~/.cache/polyjax/jax)")
+NO_CACHE_HELP = "do not read or write the compilation cache (also: POLYJAX_CACHE=off)"
+
+
+def add_global_options(p: argparse.ArgumentParser, default=None) -> argparse.ArgumentParser:
+    """``--data-root``, ``--cache-dir``, ``--no-cache`` on ``p``: the main parser (``default`` None) or the parent
+    parser of every command (``argparse.SUPPRESS``: a value given before the command is kept)."""
+    p.add_argument("--data-root", default=default, help=ROOT_HELP)
+    p.add_argument("--cache-dir", default=default, help=CACHE_HELP)
+    p.add_argument("--no-cache", action="store_true", default=False if default is None else default,
+                   help=NO_CACHE_HELP)
+    return p
+
+
+def add_image_options(p: argparse.ArgumentParser, size_help: str, exposure_help: str) -> None:
+    """``--size`` (pixels, default 256) and ``--exposure`` (stops, default 0) of the commands that make images."""
+    p.add_argument("--size", type=int, default=256, help=size_help)
+    p.add_argument("--exposure", type=float, default=0.0, help=exposure_help)
+
+
+def load_dataset(args):
+    """Measurements from --dataset / --sample, or the synthetic default when no data root is configured at all.
+
+    A data root that is given (``--data-root`` or ``$POLYJAX_DATA``) but does not exist is an error.
+    """
+    if args.dataset:
+        return pj.data.load(args.dataset, root=args.data_root), False
+    if configured_data_root(args.data_root) is not None:
+        return pj.data.load_curet(args.data_root, [args.sample]), False
+    return pj.data.synthetic_default(), True
+
+
+def parse_degrees(text, flag: str = "--degree") -> list[int]:
+    """``"7"`` or ``"2,3,5"`` -> a list of non-negative integers; InputError naming ``flag`` otherwise."""
+    try:
+        degrees = [int(d) for d in str(text).split(",") if d.strip()]
+    except ValueError:
+        degrees = []
+    if not degrees or min(degrees) < 0:
+        raise InputError(f"{flag}: expected a degree or comma-separated degrees (e.g. 5 or 2,3,5), found {text!r}")
+    return degrees
+
+
+def samples_used(data, cutoff) -> int:
+    """The fewest samples any lane of ``data`` keeps: inside the grazing cutoff (the rule of
+    :func:`polyjax.cutoff_mask`), valid in its mask, with a positive weight (numpy on the host: nothing compiled)."""
+    u, v = np.asarray(data.u), np.asarray(data.v)
+    cu = u[..., 2] / np.maximum(np.linalg.norm(u, axis=-1), 1e-300)
+    cv = v[..., 2] / np.maximum(np.linalg.norm(v, axis=-1), 1e-300)
+    keep = (cu > 0) & (cv > 0)
+    if cutoff is not None:  # the rule of pj.cutoff_mask, tolerance included
+        c = np.cos(np.radians(float(cutoff))) - 1e-9
+        keep = keep & (cu >= c) & (cv >= c)
+    if data.mask is not None:
+        keep = keep & np.asarray(data.mask)
+    if data.weights is not None:
+        keep = keep & (np.asarray(data.weights) > 0)
+    keep = keep.reshape(-1, keep.shape[-1])
+    return int(keep.sum(axis=-1).min())
+
+
+def check_degrees_fit(data, variables, degrees, interactions, cutoff, flag: str) -> None:
+    """Refuse, before any work, a degree whose polynomial has more parameters than the samples a fit uses (an
+    interpolation, not a model: the command line never asks for one).
+
+    Raises:
+        InputError: naming ``flag``, the parameters and the samples used.
+    """
+    vs = get_variables(variables)
+    n = samples_used(data, cutoff)
+    for p in degrees:
+        m = n_terms(vs.k, int(p), bool(interactions))
+        if m > n:
+            ok = [q for q in range(int(p), -1, -1) if n_terms(vs.k, q, bool(interactions)) <= n]
+            hint = f"; degree {ok[0]} or lower fits" if ok else ""
+            raise InputError(f"{flag} {p}: expected at most as many parameters as the {n} samples used (inside "
+                             f"the {cutoff} degree cutoff), found {m} parameters ({vs.name} variables{hint})")
+
+
+def _finite_or_none(x):
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _finite_or_none(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite_or_none(v) for v in x]
+    return x
+
+
+def strict_json(record) -> str:
+    """``record`` as strict JSON (RFC 8259, which has no ``Infinity`` or ``NaN``): every non-finite float becomes
+    ``null`` (e.g. the condition number of a rank-deficient fit, the PSNR of an exact re-rendering)."""
+    return json.dumps(_finite_or_none(record), allow_nan=False)

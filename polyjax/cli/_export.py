@@ -1,0 +1,131 @@
+"""``polyjax export MODEL --to mitsuba|brdf-explorer|glsl|merl --out PATH``: a saved model in another renderer."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import polyjax as pj
+
+from .._config import check_output_file
+from .._errors import InputError
+from ..export._expr import program
+from ..export._glsl import brdf_explorer, glsl
+from ..export._merl import merl_binary
+from ..export._rgl import is_rgl_source, rgl_to_merl
+from ..render._brdf import rgb_brdf
+from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
+
+FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
+
+_MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of the polyjax model {model!r} (written by `polyjax export --to mitsuba`).
+
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_rgb")        # or "scalar_rgb"
+    import {stem}
+    {stem}.register()                    # then {{"type": "{name}"}} in mi.load_dict / scene files
+"""
+
+MODEL = {model!r}
+INDEX = {index!r}
+
+
+def register(name={name!r}):
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import polyjax as pj
+
+    model = pj.load_model(MODEL)
+    if INDEX is not None:
+        model = model[INDEX]
+    return pj.export.register_mitsuba_bsdf(model, name)
+'''
+
+
+def add_export_parser(sub, parents=()) -> argparse.ArgumentParser:
+    p = sub.add_parser("export", parents=list(parents),
+                       help="write a saved model for Mitsuba 3, BRDF Explorer, GLSL or MERL tools")
+    p.add_argument("model", help="a model written by `polyjax fit --save` (.npz or .json)")
+    p.add_argument("--to", required=True, choices=sorted(FORMATS) + sorted(TARGETS), help="target format")
+    p.add_argument("--out", default=None, help="output file (default: the model's name with the format's suffix)")
+    p.add_argument("--index", action="append", default=None,
+                   help="lane of a batched model (e.g. the material, or degree then material) when it holds more "
+                   "than one BRDF: one integer per leading batch axis, comma-separated or repeated (--index 1,0 "
+                   "or --index 1 --index 0)")
+    p.add_argument("--name", default="polyjax", help="Mitsuba plugin name (--to mitsuba)")
+    add_standard_arguments(p)  # --to gltf, mitsuba-xml: a standard material fitted to a model or data set
+    return p
+
+
+def _lane_index(texts, batch_shape) -> tuple[int, ...] | None:
+    """``--index`` values (each ``"1"`` or ``"1,0"``) -> one integer per leading batch axis, checked against
+    ``batch_shape``; None when not given."""
+    if not texts:
+        return None
+    try:
+        index = tuple(int(t) for text in texts for t in str(text).split(",") if t.strip())
+    except ValueError:
+        index = ()
+    if not index:
+        raise InputError(f"--index: expected integers (e.g. --index 1,0 or --index 1 --index 0), found {texts}")
+    bs = tuple(batch_shape)
+    if len(index) > len(bs) or not all(-n <= i < n for i, n in zip(index, bs)):
+        raise InputError(f"--index: expected at most one lane per axis of the model's batch shape {bs} (each in "
+                         f"[0, size)), found {','.join(map(str, index))}")
+    return index
+
+
+def _check_one_brdf(model, index) -> None:
+    """Refuse, naming the command line's ``--index``, a model that still holds several BRDFs."""
+    bs = tuple(model.batch_shape)
+    if bs not in ((), (1,), (3,)):
+        given = f" after --index {','.join(map(str, index))}" if index else ""
+        raise InputError(f"--index: the model holds more than one BRDF (batch shape {bs}{given}): select one lane "
+                         f"per leading axis, e.g. --index {','.join('0' * (len(bs) - 1 or 1))}")
+
+
+def run_export(args) -> int:
+    """Run ``polyjax export``: the output path is checked before the model is read; returns the exit status."""
+    if is_rgl_source(args.model):
+        return _run_rgl_export(args)
+
+    if args.to in TARGETS:
+        return run_standard_export(args)
+    src = Path(args.model)
+    out = check_output_file(Path(args.out) if args.out else src.with_suffix(FORMATS[args.to]), "--out")
+    model = pj.load_model(src)
+    index = _lane_index(args.index, model.batch_shape)
+    if index is not None:
+        model = model[index]
+    _check_one_brdf(model, index)
+    if args.to == "glsl":
+        out.write_text(glsl(model))
+    elif args.to == "brdf-explorer":
+        brdf_explorer(model, out)
+    elif args.to == "merl":
+        merl_binary(model, out)
+    else:
+        if isinstance(model, pj.PolynomialBRDF):
+            program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
+        rgb_brdf(model)
+        out.write_text(_MITSUBA_SCRIPT.format(model=str(src.resolve()), index=index, name=args.name,
+                                              stem=out.stem))
+    print(f"wrote {out} ({args.to})")
+    return 0
+
+
+def _run_rgl_export(args) -> int:
+    """``polyjax export <file.bsdf or rgl:spec> --to merl``: an RGL-EPFL measured BSDF as a MERL ``.binary``."""
+    if args.to != "merl":
+        raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl' only, found {args.to!r}")
+    name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
+    out = Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"])
+    rgl_to_merl(name, out, root=getattr(args, "data_root", None))
+    print(f"wrote {out} (merl, from the RGL-EPFL file {name})")
+    return 0
+
+
+def add_parser(sub, common) -> None:
+    """The ``export`` command's parser."""
+    add_export_parser(sub, parents=[common]).set_defaults(func=run_export)

@@ -1,0 +1,181 @@
+"""The ``polyjax fit-photos`` and ``polyjax relight`` commands: photographs under calibrated lights.
+
+``polyjax fit-photos FOLDER --save model.npz`` fits the polynomial BRDF to a capture in DiLiGenT's layout
+(:func:`polyjax.data.load_photometric`, ``docs/photometric.md``); ``polyjax relight model.npz FOLDER --out DIR``
+predicts the capture's images under its lights and writes, per light, the prediction and its error as EXR (linear)
+and PNG (16-bit linear prediction, like the inputs; 8-bit error map), and prints the relative RMS and PSNR.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import png
+
+import polyjax as pj
+
+from .._errors import InputError
+from ..render._image import write_exr, write_png
+
+#: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``)
+DEFAULTS = dict(variables="rusinkiewicz", degree=8, interactions=True, link="identity", weighting="brdf",
+                robust_steps=0, cutoff=90.0)
+
+
+def parse_lights(text: str | None):
+    """``"0,2,4"`` or ``"0:48:2"`` (0-based lines of ``filenames.txt``, Python slices) -> indices, or None."""
+    if text is None:
+        return None
+    out = []
+    for part in text.split(","):
+        try:
+            if ":" in part:
+                bits = [int(b) if b else None for b in part.split(":")]
+                out.extend(range(*slice(*bits).indices(10**6)) if bits[1] is not None else [])
+                if bits[1] is None:
+                    raise ValueError("a range needs its end")
+            else:
+                out.append(int(part))
+        except ValueError:
+            raise InputError(f"--lights: expected 0-based indices or ranges such as 0,2,4 or 0:48:2, found "
+                             f"{text!r}") from None
+    return out
+
+
+def add_photo_parsers(subparsers, parents=()) -> None:
+    """Add ``fit-photos`` and ``relight`` to an ``argparse`` subparsers object."""
+    f = subparsers.add_parser(
+        "fit-photos", parents=list(parents), help="fit the polynomial BRDF to photographs under calibrated lights",
+        description="Fit the polynomial BRDF in closed form to a capture in DiLiGenT's layout (filenames.txt, "
+        "light_directions.txt, light_intensities.txt, 16-bit PNGs, mask.png, Normal_gt.mat or normal.txt).")
+    f.add_argument("folder", help="the capture's folder (e.g. pmsData/ballPNG)")
+    f.add_argument("--lights", default=None, help="0-based lines of filenames.txt to fit, e.g. 0,2,4 or 0:48:2")
+    f.add_argument("--variables", default=DEFAULTS["variables"], help="explanatory variables (default rusinkiewicz)")
+    f.add_argument("--degree", type=int, default=DEFAULTS["degree"], help="polynomial degree (default 8)")
+    f.add_argument("--no-interactions", dest="interactions", action="store_false",
+                   help="equation (3) instead of the full response surface of equation (2)")
+    f.add_argument("--link", default=DEFAULTS["link"], choices=["identity", "log"], help="model link")
+    f.add_argument("--weighting", default=DEFAULTS["weighting"], choices=["brdf", "radiance"],
+                   help="residual space (default brdf: the pixels' BRDF samples)")
+    f.add_argument("--robust-steps", type=int, default=DEFAULTS["robust_steps"],
+                   help="Tukey-reweighted solves after the first (default 0: plain least squares)")
+    f.add_argument("--cutoff", type=float, default=DEFAULTS["cutoff"], help="grazing cutoff in degrees (default 90)")
+    f.add_argument("--save", required=True, help="the model file to write (.npz or .json)")
+    f.add_argument("--json", action="store_true", help="machine-readable output")
+    f.set_defaults(func=run_fit_photos, interactions=DEFAULTS["interactions"])
+    r = subparsers.add_parser(
+        "relight", parents=list(parents), help="predict a capture's photographs with a fitted model",
+        description="Render a fitted model under the lights of a capture in DiLiGenT's layout; write the predicted "
+        "images and error maps (EXR and PNG) and print the relative RMS and PSNR of each light.")
+    r.add_argument("model", help="a model file written by fit-photos (or polyjax.save_model)")
+    r.add_argument("folder", help="the capture's folder")
+    r.add_argument("--lights", default=None, help="0-based lines of filenames.txt, e.g. 1,3,5 or 1:48:2")
+    r.add_argument("--out", required=True, help="folder for the images (created; existing files are replaced)")
+    r.add_argument("--json", action="store_true", help="machine-readable output")
+    r.set_defaults(func=run_relight)
+
+
+def _check_writable_file(path: str) -> Path:
+    p = Path(path)
+    if p.suffix not in (".npz", ".json"):
+        raise InputError(f"--save: expected a .npz or .json file name, found {path!r}")
+    if p.is_dir() or not p.parent.resolve().is_dir() or not os.access(p.parent.resolve(), os.W_OK):
+        raise InputError(f"--save: {path}: expected a file in an existing, writable folder")
+    return p
+
+
+def _check_out_dir(path: str) -> Path:
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InputError(f"--out: {path} exists and is not a folder")
+    parent = p if p.exists() else p.parent
+    if not parent.resolve().is_dir() or not os.access(parent.resolve(), os.W_OK):
+        raise InputError(f"--out: {path}: expected a writable folder (or one that can be created)")
+    return p
+
+
+def run_fit_photos(args) -> int:
+    """Run ``polyjax fit-photos``; returns the exit status."""
+    save = _check_writable_file(args.save)
+    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
+    t0 = time.perf_counter()
+    model = pj.fit_polynomial_to_images(
+        capture.scenes, capture.images, args.variables, args.degree, saturation=capture.saturation,
+        cutoff_deg=None if args.cutoff >= 90 else args.cutoff, interactions=args.interactions, link=args.link,
+        weighting=args.weighting, robust_steps=args.robust_steps)
+    seconds = time.perf_counter() - t0
+    status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
+    pj.save_model(save, model, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
+    out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
+           "degree": args.degree, "interactions": bool(args.interactions), "link": args.link,
+           "weighting": args.weighting, "robust_steps": args.robust_steps, "status_rgb": status,
+           "fit_seconds": seconds, "saved": str(save)}
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {args.variables} "
+              f"p={args.degree}{' with interactions' if args.interactions else ''}, link {args.link}, "
+              f"{args.weighting} weighting, {args.robust_steps} robust steps ({seconds:.2f} s)")
+        print(f"  status: {', '.join(status)}; model written to {save}")
+    return 0 if all(s == "OK" for s in status) else 1
+
+
+def errors_of(predicted, capture):
+    """Per light ``(relative RMS, PSNR in dB)`` of ``predicted (L, H, W, 3)`` against the capture's images, over the
+    mask's pixels with no saturated channel (PSNR's peak: the camera's white, ``capture.saturation``)."""
+    images = np.asarray(capture.images)
+    keep = np.asarray(capture.mask)[None] & np.all(images < capture.saturation, axis=-1)
+    rows = []
+    for p, img, k in zip(np.asarray(predicted), images, keep):
+        d2, ref2 = np.sum((p[k] - img[k]) ** 2), np.sum(img[k] ** 2)
+        mse = d2 / max(3 * int(k.sum()), 1)
+        rows.append((float(np.sqrt(d2 / ref2)) if ref2 > 0 else float("inf"),
+                     float(10 * np.log10(capture.saturation**2 / mse)) if mse > 0 else float("inf")))
+    d2 = sum(np.sum((p[k] - i[k]) ** 2) for p, i, k in zip(np.asarray(predicted), images, keep))
+    total = float(np.sqrt(d2 / np.sum(images[keep] ** 2)))
+    return rows, total
+
+
+def write_png16(path: Path, image) -> None:
+    """An ``(H, W, 3)`` image in ``[0, 1]`` as a 16-bit linear RGB PNG (the inputs' format)."""
+    px = np.round(np.clip(np.asarray(image, np.float64), 0.0, 1.0) * 65535).astype(np.uint16)
+    h, w, _ = px.shape
+    with open(path, "wb") as fh:
+        png.Writer(w, h, greyscale=False, bitdepth=16).write(fh, px.reshape(h, w * 3))
+
+
+def run_relight(args) -> int:
+    """Run ``polyjax relight``; returns the exit status."""
+    out_dir = _check_out_dir(args.out)
+    model = pj.load_model(args.model)
+    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights))
+    predicted = np.asarray(pj.relight(model, capture))
+    rows, total = errors_of(predicted, capture)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    err = predicted - np.asarray(capture.images)
+    scale = float(np.max(np.abs(err[:, np.asarray(capture.mask)]))) or 1.0
+    for name, p, e in zip(capture.names, predicted, err):
+        stem = out_dir / Path(name).stem
+        write_exr(f"{stem}_predicted.exr", p)
+        write_png16(Path(f"{stem}_predicted.png"), p)
+        write_exr(f"{stem}_error.exr", e)
+        write_png(f"{stem}_error.png", np.abs(e) / scale, srgb=False)
+    result = {"lights": capture.names, "relative_rms": [r for r, _ in rows], "psnr_db": [p for _, p in rows],
+              "relative_rms_all": total, "error_png_scale": scale, "out": str(out_dir)}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for name, (rel, ps) in zip(capture.names, rows):
+            print(f"  {name}: relative RMS {rel:.4f}, PSNR {ps:.2f} dB")
+        print(f"relight: {capture.n_lights} lights, relative RMS {total:.4f} over the mask (saturated pixels left "
+              f"out); images in {out_dir} (error PNGs: |error| / {scale:.4g})")
+    return 0
+
+
+def add_parser(sub, common) -> None:
+    """The parsers of ``fit-photos`` and ``relight``."""
+    add_photo_parsers(sub, parents=[common])

@@ -1,0 +1,41 @@
+"""polyjax for extension packages: what a package that adds fitters or kinds of saved model builds on.
+
+Public, but not the user's API (``polyjax.__all__``): ``baselines`` is built on exactly these and on the public API,
+and imports nothing private of polyjax; another extension package can do the same. The names are kept stable as
+the user API is, but they follow polyjax's internals, so their arguments may grow with them.
+
+- inputs: :func:`prepare_inputs` (the checks and flattening every fitter shares, ``docs/conventions.md``) and
+  :class:`PreparedInputs`; :func:`check_parameter_count` (no interpolating fits); :func:`fit_weights` (the weights
+  of equation (11));
+- tracing: :func:`is_traced`, :func:`is_concrete` (a check made eagerly only, a memo kept only for concrete arrays);
+- results: :func:`raise_on_status` (``throw=`` of every fitter), :func:`result_message`;
+- LAPACK: :func:`one_lapack_thread` (decorate a public fitter: jaxlib's LAPACK library limited before it runs);
+- saved models: :class:`ModelKind`, :func:`module_kind`, :func:`register_model_kind`, :func:`model_kinds`,
+  :func:`kind_named`, :func:`kind_of`, :func:`fitter_for` (``polyjax.save_model``/``load_model`` and
+  ``polyjax fit --model`` find other packages' models through them);
+- data: :func:`data_file`, :func:`configured_data_root` (files below the data root);
+- saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
+  :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env` (a fitter keeping its compiled executable beside the
+  compilation cache, as ``polyjax fit`` does).
+"""
+
+from ._arrays import device_array, is_concrete, is_traced
+from ._cache.compilation import cache_disabled_by_env
+from ._cache.keys import program_key, source_stamp
+from ._config import configured_data_root, data_file
+from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
+from ._fit.saved import FOLDER as SAVED_PROGRAMS_FOLDER
+from ._fit.saved import _load_lapack as load_lapack_kernels
+from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
+from ._io import ModelKind, fitter_for, kind_named, kind_of, model_kinds, module_kind, register_model_kind
+from ._metrics import fit_weights
+from ._results import message as result_message
+from ._results import raise_on_status
+from ._solve.threads import one_lapack_thread
+
+__all__ = [
+    "SAVED_PROGRAMS_ENV", "SAVED_PROGRAMS_FOLDER", "cache_disabled_by_env", "load_lapack_kernels", "program_key", "source_stamp",
+    "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
+    "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
+    "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
+]
