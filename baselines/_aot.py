@@ -2,11 +2,11 @@
 
 JAX's persistent compilation cache saves the compiling, but every process still traces and lowers each program to
 find its cache key; for the multi-start kernel (a vmapped Levenberg-Marquardt loop inside a loop of jobs) that is
-seconds, most of a warm first fit. So, as :mod:`polyjax._aot` does for ``polyjax fit``, the whole fit of concrete
+seconds, most of a warm first fit. So, as :mod:`polyjax._fit.saved` does for ``polyjax fit``, the whole fit of concrete
 inputs (input preparation, the kernel, the kept optimum and the result codes) is one jitted program, compiled ahead
 of time and serialised (:mod:`jax.experimental.serialize_executable`) into ``<cache folder>/polyjax-programs/``, keyed
-the way :mod:`polyjax._aot` keys its programs: the input shapes and dtypes (and which are None), every option of the
-fit, the versions of JAX and jaxlib, the machine and its device kind, float64 on or off, XLA's options, and the
+the way :mod:`polyjax._fit.saved` keys its programs: the input shapes and dtypes (and which are None), every option
+of the fit, the versions of JAX and jaxlib, the machine and its device kind, float64 on or off, XLA's options, and the
 source files of polyjax and baselines (their sizes and modification times). A later process with the same key loads
 the executable and runs it; within a process the last 16 executables stay loaded.
 

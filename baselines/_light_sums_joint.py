@@ -1,5 +1,6 @@
 r"""The light-summed image fit (:mod:`baselines._light_sums`) of a standard material model, its R, G, B channels
-jointly: one roughness (metallic, IOR, ...) for the three channels, a colour per channel (:mod:`baselines._joint`).
+jointly: one roughness (metallic, IOR, ...) for the three channels, a colour per channel
+(:mod:`baselines._models.joint`).
 
 The image's three channels are one lane: with the joint parameters ``tau = [shared, colour(R), colour(G),
 colour(B)]`` and ``tau_k`` channel ``k``'s parameters taken from them, the residuals
@@ -26,9 +27,9 @@ import jax.numpy as jnp
 from polyjax import RESULTS
 
 from ._implicit import implicit_least_squares, safe_sqrt
-from ._models.joint import SUFFIX, channel_index
 from ._light_sums import _safe_directions, light_sum_residual
 from ._lm import lm_solve
+from ._models.joint import SUFFIX, channel_index
 from ._models.registry import get_model
 from ._multistart import _LIMIT_TOL, _pick
 from ._starts import _nonlinear_starts

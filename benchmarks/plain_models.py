@@ -38,7 +38,7 @@ def _real(r):
 
 
 class Geometry:
-    """Clamped cosines and the half vector of ``(n, 3)`` directions, as ``baselines._common.Geometry``."""
+    """Clamped cosines and the half vector of ``(n, 3)`` directions, as ``baselines._models.common.Geometry``."""
 
     def __init__(self, u, v):
         self.u, self.v = u, v

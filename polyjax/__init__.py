@@ -79,7 +79,8 @@ __all__ = [
     "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form", "explanatory_variables",
     "exponents", "export", "fit_log_polynomial", "fit_pca", "fit_polynomial", "fit_polynomial_to_images", "FitError",
     "fitted_design", "get_variables", "half_vector", "has_data_root", "image_rows", "ImageRows", "InputError",
-    "inverse", "l2_error", "lapack_threads", "load_model", "LstsqSolution", "make_measurements", "Measurements", "model_metadata",
+    "inverse", "l2_error", "lapack_threads", "load_model", "LstsqSolution", "make_measurements", "Measurements",
+    "model_metadata",
     "n_parameters", "n_terms", "PCA", "PolyjaxError", "PolynomialBRDF", "psnr", "reflect", "register_variables",
     "relight", "render", "RESULTS", "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "THREADS_ENV",
     "UnknownNameError", "variable_sets", "VariableSet", "view", "weighted_lstsq"

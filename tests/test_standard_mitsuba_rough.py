@@ -13,8 +13,8 @@ from _mitsuba_rough_problems import ROUGH_PARAMS
 import baselines as bl
 import polyjax as pj
 import polyjax.render as pr
-from baselines import _rough_plastic
-from polyjax._cli import main
+from baselines._models import rough_plastic as _rough_plastic
+from polyjax.cli import main
 from polyjax.export._mitsuba_choice import choose_plugin
 
 from _baseline_problems import synthetic_geometry

@@ -79,7 +79,7 @@ def _page_data(path):
 
 
 def test_capture_samples_photographs_and_relit_fit(browser, capture, tmp_path):  # noqa: F811
-    from polyjax.render._photo_cli import errors_of
+    from polyjax.cli._photos import errors_of
 
     folder, loaded, fit = capture
     path = pj.view.write_page([("fit", fit), str(folder)], tmp_path / "capture.html",
@@ -153,7 +153,7 @@ def test_rgl_file_is_a_table_of_its_bsdf_at_the_bin_centres(browser, tmp_path): 
 
 @pytest.mark.data
 def test_shared_rgl_file_by_name(tmp_path):
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     out = tmp_path / "paper.html"
     assert main(["view", "rgl:paper_white_rgb", "--table-resolution", "6,6,12", "--out", str(out)]) == 0
@@ -163,7 +163,7 @@ def test_shared_rgl_file_by_name(tmp_path):
 
 
 def test_fit_time_is_kept_in_the_saved_model_and_shown(browser, tmp_path, monkeypatch, capsys):  # noqa: F811
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     monkeypatch.delenv(pj.DATA_ENV, raising=False)  # the synthetic data set
     saved = tmp_path / "fit.json"
@@ -193,7 +193,7 @@ def test_fit_time_is_kept_in_the_saved_model_and_shown(browser, tmp_path, monkey
 
 @pytest.mark.data
 def test_diligent_ball_photographs_on_the_page(browser, data_root, tmp_path):  # noqa: F811
-    from polyjax._cli import main
+    from polyjax.cli import main
 
     folder = data_root / "diligent" / "ballPNG"
     out = tmp_path / "ball.html"

@@ -26,7 +26,7 @@ def roughconductor_brdf(eta, k, alpha, u, v, beckmann: bool = False):
     .. math:: f = \frac{F_c(v\cdot h;\ \eta + i k)\, D(h)\, G_1(v, h)\, G_1(u, h)}{4 \cos\theta_u \cos\theta_v},
 
     ``F_c`` the unpolarised conductor Fresnel reflectance, ``D`` and ``G_1`` GGX (or Beckmann) of roughness
-    ``alpha`` (:mod:`baselines._mi_microfacet`); 0 where a direction is below the horizon.
+    ``alpha`` (:mod:`baselines._models.mi_microfacet`); 0 where a direction is below the horizon.
     """
     g = Geometry(u, v)
     d = ndf(g.nh, alpha, beckmann)

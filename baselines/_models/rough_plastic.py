@@ -7,7 +7,7 @@ Mitsuba's diffuse term is ``rho / (1 - R_i) / (pi eta^2) T(cos theta_u) T(cos th
 interface's transmittance ``T`` tabulated at 64 cosines (``eval_transmittance``, Gauss-Legendre 32 x 32) and
 linearly interpolated, and its internal diffuse reflectance ``R_i = 2 mean_mu(mu R(mu; 1 / eta))``
 (``eval_reflectance``, 128 x 128 nodes) computed when the plugin loads. ``T`` is evaluated here as Mitsuba computes
-it (:mod:`baselines._mi_microfacet`). ``R_i`` by the same rule at 32 x 32 nodes (a quarter of the cost: the fit
+it (:mod:`baselines._models.mi_microfacet`). ``R_i`` by the same rule at 32 x 32 nodes (a quarter of the cost: the fit
 evaluates it at every step of every start), which differs from Mitsuba's 128 x 128 value by up to 2e-3 (0.4 %
 of ``1 - R_i`` at ``eta = 1.5``, 1.4 % at 2.5); the material :func:`to_material` writes therefore carries
 ``diffuse_reflectance = rho (1 - R_i^{128}) / (1 - R_i^{32})``, with which Mitsuba's plugin evaluates to this model

@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._errors import InputError
+from .._io import fitter_for
+
 #: the Mitsuba plugins ``--to mitsuba-xml`` chooses from, simplest first (each a model of that name)
 PLUGINS = ("roughconductor", "roughplastic", "principled")
 #: how much larger than ``principled``'s mean L2 a simpler plugin's may be and still be chosen
@@ -33,9 +36,6 @@ def choose_plugin(errors: dict[str, float], tolerance: float = TOLERANCE) -> str
 def fit_plugin(data, plugin: str, tolerance: float):
     """``(model name, fit)``: the fit of ``plugin`` to ``data``, or with ``"auto"`` of every candidate and the one
     :func:`choose_plugin` picks (each candidate's mean L2 printed)."""
-    from .._errors import InputError
-    from .._kinds import fitter_for
-
     if plugin != "auto" and plugin not in PLUGINS:
         raise InputError(f"--plugin: expected 'auto' or one of {list(PLUGINS)}, found {plugin!r}")
     if not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance >= 0):

@@ -22,8 +22,10 @@ import base64
 
 import numpy as np
 
-from ..inverse._capture import Capture
+import polyjax as pj
+
 from .._errors import InputError
+from ..inverse._capture import Capture
 from ._items import ViewItem
 
 #: the longest side, in pixels, of the photographs on the page (larger ones are strided)
@@ -43,8 +45,6 @@ def shown_capture(capture: Capture, max_size: int = MAX_PHOTO_SIZE) -> tuple[Cap
 
 def capture_samples(capture: Capture) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The BRDF samples ``(u (n, 3), v (n, 3), b (n, 3))`` of the capture's kept pixels (module notes)."""
-    import polyjax as pj
-
     rows = pj.image_rows(capture.scenes, capture.images, saturation=capture.saturation, cutoff_deg=None)
     c = np.asarray(rows.weight)[:, 0]
     lit = np.all(c > 0, axis=-1)

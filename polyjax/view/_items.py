@@ -18,15 +18,12 @@ r"""What the page shows: every fit or data set becomes one :class:`ViewItem` of 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 
-from .._errors import DataNotFoundError, InputError
-from .._io import load_model
+from .._errors import InputError
 from .._measurements import Measurements
 from .._model import PolynomialBRDF
-from ..data._load import load
 from ..data._merl import directions_to_rusinkiewicz, merl_index
 from ..data._nbrdf import NeuralBRDF
 from ..export._expr import program

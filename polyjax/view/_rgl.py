@@ -8,6 +8,10 @@ A coarse table is thus the BRDF at its bin centres, not an average of a finer gr
 
 from __future__ import annotations
 
+import numpy as np
+
+import polyjax as pj
+
 from .._errors import InputError
 from ._items import MERL_RESOLUTION, ViewItem
 
@@ -16,10 +20,6 @@ def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem
     """The item of an ``rgl:`` spec: a table of the measured BSDF at the bin centres, bin ``i`` holding the value
     at direction pair ``i`` of :func:`polyjax.data.merl_grid` (not binned again: at ``theta_h = theta_d = 0``
     every ``phi_d`` bin has the same directions)."""
-    import numpy as np
-
-    import polyjax as pj
-
     resolution = tuple(int(n) for n in resolution)
     u, v, _, above = pj.data.merl_grid(resolution)
     data = pj.data.load(spec, root=root, directions=(u[above], v[above]))
