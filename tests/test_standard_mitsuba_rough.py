@@ -198,7 +198,7 @@ def test_export_mitsuba_xml_roughconductor_renders_as_polyjax(tmp_path, capsys):
     theirs = np.asarray(mi.render(mi.load_file(str(path))), float)
     ours = np.asarray(pr.render(scene, dtype=jnp.float64).image)
     assert theirs.max() > 0.05
-    assert float(pj.psnr(ours, theirs)) >= 40.0
+    assert float(pj.psnr(ours, theirs)) >= 40.0  # measured: 141.6 dB (float32 rounding in Mitsuba)
     with pytest.raises(pj.InputError, match="distribution"):
         pj.export.mitsuba_xml({"model": "principled", "distribution": "ggx", "base_color": [0.5] * 3,
                                "roughness": 0.3, "metallic": 0.0, "specular": 0.5}, tmp_path / "bad.xml")
