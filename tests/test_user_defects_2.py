@@ -400,7 +400,7 @@ def test_progress_line_names_the_stage(monkeypatch):
 
     import jax.monitoring
 
-    from polyjax import _progress
+    from polyjax.cli import _progress
 
     _progress._listen()
     ready = _progress._EVENTS["ready"]

@@ -13,11 +13,12 @@ from jax.experimental import multihost_utils
 
 import polyjax as pj
 
+from .. import svbrdf
 from .._basis import n_terms
 from .._config import check_output_dir
 from .._errors import InputError
 from .._variables import get_variables
-from ..svbrdf import _distributed, fit_rows_distributed, photograph, relight, simulate_capture, write_texture_shards
+from ..svbrdf import _distributed, photograph, relight, simulate_capture, write_texture_shards
 from ..svbrdf._capture import spread_cameras
 from ..svbrdf._shards import FORMATS, local_part
 from ._args import strict_json
@@ -116,7 +117,7 @@ def run_svbrdf(args) -> int:
         return dict(u=u, v=v, values=b, weights=w)
 
     t0 = time.perf_counter()
-    model = fit_rows_distributed(load_rows, args.size, args.variables, args.degree)
+    model = svbrdf.fit_rows_distributed(load_rows, args.size, args.variables, args.degree)  # the package's own name
     jax.block_until_ready(model.coefficients)
     t_fit = time.perf_counter() - t0
     manifest = write_texture_shards(args.out, model, formats=formats)
