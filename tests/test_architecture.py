@@ -289,7 +289,7 @@ def test_circle_check_finds_circles_through_functions_and_faces(sources, circle)
     ("polyjax/_x.py", "def f():\n    from ._fit import polynomial\n", True),
     ("polyjax/render/_x.py", "def f():\n    import polyjax as pj\n", True),
     ("baselines/_x.py", "class A:\n    def m(self):\n        from ._result import BaselineFit\n", True),
-    ("polyjax/render/__init__.py", "def helper():\n    from . import _brdf\n", True),
+    ("polyjax/render/__init__.py", "def build():\n    from . import _brdf\n", True),
     ("polyjax/render/__init__.py", "def __getattr__(name):\n    from . import _brdf\n", False),
     ("polyjax/cli/_main.py", "def f():\n    from . import _fit\n", False),
     ("polyjax/_x.py", "from ._fit import polynomial\ndef f():\n    import mitsuba\n", False),

@@ -1,4 +1,4 @@
-"""Argument helpers every command shares: the options of every command (data root, cache), degrees, dataset specs,
+"""What every command shares: the options of every command (data root, cache), degrees, dataset specs,
 the samples a fit keeps, the image options of ``render`` and ``view``, strict JSON output."""
 
 from __future__ import annotations
