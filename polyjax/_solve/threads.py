@@ -14,7 +14,7 @@ the PCA, the weighted solve, the sampling tables, the baselines' fits):
 - if it was loaded before (the user's own scipy call), its count is set to the limit (``threadpoolctl``);
 - either way the count **stays** at the limit after the call. Putting it back after each call was measured to be
   the wrong way: every change of OpenBLAS's count wakes its workers, which then spin, so a process alone kept 1.95
-  cores busy on a fit that needs one, and two such processes ran 60-100x slower again (``bench_concurrency.py``,
+  cores busy on a fit that needs one, and two such processes ran 60-160x slower again (``bench_concurrency.py``,
   setting ``restore``).
 
 Only that library is limited (scipy's OpenBLAS, found by its file path; all BLAS libraries where scipy's cannot be
