@@ -299,24 +299,33 @@ def _shared_kernel(inp, u, v, w, mask, *, variables, degree, basis, interactions
     b = jnp.maximum(values, 0.0) + eps
     rms = jnp.sqrt(jnp.sum(wc2 * b * b, -1, keepdims=True) / jnp.maximum(jnp.sum(wc2, -1, keepdims=True), 1e-300))
     fl2 = (floor * rms) ** 2
-    model = solve(jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power))
+    start = (jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power))
 
-    def gauss_newton_step(_, carry):
+    def solve_step(i, carry):  # i = 0: the log-space start; then the Gauss-Newton steps (one solve, compiled once)
         model, l2 = carry
         f = predict(model["coefficients"])
         g = jnp.maximum(f + eps, jnp.finfo(values.dtype).tiny)
-        step = solve(jnp.log(g) + (values - f) / g, w * jnp.maximum(g * g, fl2))
-        for t in STEP_LENGTHS:
-            cand = dict(step, coefficients=model["coefficients"] + t * (step["coefficients"] - model["coefficients"]))
-            l2_c = score(cand["coefficients"])
-            better = l2_c < l2
-            model = _select(better, cand, model)
-            l2 = jnp.where(better, l2_c, l2)
-        return model, l2
+        first = i == 0
+        step = solve(jnp.where(first, start[0], jnp.log(g) + (values - f) / g),
+                     jnp.where(first, start[1], w * jnp.maximum(g * g, fl2)))
+        return jax.lax.cond(first, lambda: (step, score(step["coefficients"])),
+                            lambda: _line_search(model, step, l2, score))
 
-    model, l2 = jax.lax.fori_loop(0, steps, gauss_newton_step, (model, score(model["coefficients"])))
+    blank = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(solve, *start))
+    model, l2 = jax.lax.fori_loop(0, steps + 1, solve_step, (blank, jnp.zeros(values.shape[:1], values.dtype)))
     return dict(model, l2=l2)
 
+
+def _line_search(model: dict, step: dict, l2, score):
+    """Lane-wise the best of ``model`` (L2 ``l2``) and the steps towards ``step`` of :data:`STEP_LENGTHS` by
+    ``score`` (each candidate compared with the best so far, as :func:`_gauss_newton` does): ``(model, l2)``."""
+    for t in STEP_LENGTHS:
+        cand = dict(step, coefficients=model["coefficients"] + t * (step["coefficients"] - model["coefficients"]))
+        l2_c = score(cand["coefficients"])
+        better = l2_c < l2
+        model = _select(better, cand, model)
+        l2 = jnp.where(better, l2_c, l2)
+    return model, l2
 
 def _as_log(model: PolynomialBRDF, eps: float) -> PolynomialBRDF:
     return PolynomialBRDF(**{k: getattr(model, k) for k in _FIELDS}, variables=model.variables, basis=model.basis,
