@@ -140,3 +140,34 @@ def test_log_fit_grad_matches_finite_differences(geometry):
     fd = (_loss(u, v, b + h * d) - _loss(u, v, b - h * d)) / (2 * h)
     assert np.all(np.isfinite(np.asarray(g)))
     np.testing.assert_allclose(float(jnp.dot(g, d)), float(fd), rtol=1e-5)
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, geometry, stream):
+    """Lanes keeping the same samples run every solve in one program on their shared design (held whole, or streamed
+    as for tall data): the fit of one ``fit_polynomial`` call per solve, which lanes with samples of their own get."""
+    from polyjax._fit import log as _logfit
+
+    u, v = geometry
+    lobe = _lobe(u, v)
+    b = jnp.stack([lobe, 0.5 * lobe + 0.05, 0.2 + 0.1 * u[:, 0]])
+    w = jnp.asarray(np.random.default_rng(2).uniform(0.5, 1.5, b.shape[-1]))
+    kw = dict(variables="rusinkiewicz", degree=3, weights=w, cutoff_deg=70.0)
+
+    def no_per_solve(*args, **kwargs):
+        raise AssertionError("the per-solve path was taken")
+
+    monkeypatch.setattr(_logfit, "use_stream", lambda *args: stream)
+    monkeypatch.setattr(_logfit, "_gauss_newton", no_per_solve)
+    shared = pj.fit_log_polynomial(u, v, b, **kw)
+    monkeypatch.undo()
+    check = _logfit._check_inputs
+    monkeypatch.setattr(_logfit, "_same_samples", lambda *args: False)
+    monkeypatch.setattr(_logfit, "_check_inputs", lambda *args: check(*args)[:-1] + (False,))
+    per_solve = pj.fit_log_polynomial(u, v, b, **kw)
+    c = np.asarray(per_solve.coefficients)
+    np.testing.assert_allclose(np.asarray(shared.coefficients), c, rtol=0, atol=1e-12 * np.abs(c).max())
+    np.testing.assert_allclose(np.asarray(shared.l2), np.asarray(per_solve.l2), rtol=1e-12)
+    for field in ("rank", "status", "n_used"):
+        np.testing.assert_array_equal(np.asarray(getattr(shared, field)), np.asarray(getattr(per_solve, field)))
+    assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, **kw).l2))

@@ -28,22 +28,43 @@ kernel of :func:`polyjax.fit_polynomial`):
 
 ``1 + steps`` solves in all (default ``steps=3``: 4 solves). Every solve uses the same samples, hence
 the same principal components and basis, so the coefficients of different steps combine linearly.
+
+When every lane (colour channel, material) keeps the same samples (directions ``(n, 3)``, and the same samples
+kept by the weights, mask and cutoff in every lane), the whole sequence of solves runs in one compiled program
+(:func:`_shared_kernel`) on the lanes' one design: the samples' variables and the model's values at the samples are
+made for every lane at once; only the weighted factorisation is made per lane and solve
+(the weights of every solve depend on the lane's values), one lane after the other, each as
+:func:`polyjax.fit_polynomial` makes it: on the design held whole (differentiable), or, for concrete tall inputs,
+streamed a block of rows at a time as ``fit_polynomial`` streams a shared design (:mod:`polyjax._fit.stream`). Otherwise
+(per-lane directions, lanes that keep different samples) each solve is a :func:`polyjax.fit_polynomial` call
+(:func:`_gauss_newton`). On the DiLiGenT ball (352,745 BRDF samples, 3 channels, Rusinkiewicz ``p = 8`` with
+interactions) the shared program is the per-solve calls' result to 3e-14 (coefficients) and several times faster
+(``benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from .._arrays import is_traced
+from .._arrays import is_concrete, is_traced
+from .._basis import n_terms, term_degrees
+from .._design import fitted_design
 from .._errors import InputError
+from .._inputs import check_parameter_count, prepare_inputs
 from .._measurements import Measurements
 from .._metrics import fit_weights, l2_error
 from .._model import PolynomialBRDF
+from .._solve.lstsq import weighted_lstsq
 from .._solve.threads import one_lapack_thread
-from .closed_form import fit_closed_form
+from .._variables import get_variables
+from .closed_form import _lane, _raise_on_status, _residual_l2, check_fit_options, fit_closed_form
+from .closed_form import _result_fields as _outputs
+from .stream import BLOCK, _design_t, _scaled_components, _stream_map, stream_geometry, streamed_lane, use_stream
 
 #: the step lengths tried after every Gauss-Newton solve (0, the current model, is always a candidate)
 STEP_LENGTHS = (1.0, 0.5, 0.25)
@@ -94,16 +115,21 @@ def fit_log_polynomial(
         Differentiable with respect to ``values``, ``weights`` and directions wherever
         :func:`polyjax.fit_polynomial` is (the step choice is piecewise constant).
     """
-    u, v, values, w, mask, variables, eps = _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask)
+    u, v, values, w, mask, variables, eps, shared = _check_inputs(u, v, values, variables, degree, eps, steps,
+                                                                  weights, mask)
     opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
             "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
-    return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, eps=eps, steps=int(steps), floor=floor,
-                         start_power=start_power)
+    gn = dict(eps=eps, steps=int(steps), floor=float(floor), start_power=float(start_power))
+    if shared or _same_samples(u, v, w, mask, cutoff_deg):
+        return _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
+    return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
 
 
 def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):
     """The arguments of :func:`fit_log_polynomial` checked (before any work) and converted: ``(u, v, values,
-    weights (*batch, n), mask, variables, eps)``, the arrays in the float type of ``values``."""
+    weights (*batch, n), mask, variables, eps, shared)``, the arrays in the float type of ``values``; ``shared``:
+    every lane has the same samples by the shapes alone (directions ``(n, 3)``, weights and mask ``(n,)`` or
+    None)."""
     if isinstance(u, Measurements):
         data = u
         if values is not None or (v is not None and not isinstance(v, str)):
@@ -132,7 +158,8 @@ def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):
     u = jnp.asarray(u, values.dtype)
     v = jnp.asarray(v, values.dtype)
     w = jnp.ones(values.shape[-1:], values.dtype) if weights is None else jnp.asarray(weights, values.dtype)
-    return u, v, values, jnp.broadcast_to(w, values.shape), mask, variables, float(eps)
+    shared = u.ndim == 2 and w.ndim == 1 and (mask is None or np.ndim(mask) == 1)
+    return u, v, values, jnp.broadcast_to(w, values.shape), mask, variables, float(eps), shared
 
 
 def _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, *, eps, steps, floor, start_power):
@@ -167,6 +194,142 @@ def _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, *, eps, steps, floor,
     return _with_l2(model, l2)
 
 
+def _same_samples(u, v, w, mask, cutoff_deg) -> bool:
+    """Whether concrete inputs keep the same samples in every lane (per-lane weights or masks with the same zeros,
+    e.g. radiance-space weights of coloured lights): then the lanes share one design."""
+    if u.ndim != 2 or not is_concrete(u, v, w, mask):
+        return False
+    keep = np.asarray(fit_weights(u, v, w, mask, cutoff_deg)[0] > 0).reshape(-1, u.shape[0])
+    return bool(np.all(keep == keep[:1]))
+
+
+def _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn) -> PolynomialBRDF:
+    """:func:`_gauss_newton` for lanes with the same samples: the checks of :func:`polyjax.fit_polynomial` once,
+    then every solve in one compiled program (:func:`_shared_kernel`), streamed where ``fit_polynomial`` would
+    stream a shared design (:func:`polyjax._stream.use_stream`: concrete inputs, ``method="qr"``, tall data)."""
+    vs = get_variables(opts["variables"])
+    degree, interactions = opts["degree"], bool(opts["interactions"])
+    check_fit_options(opts["basis"], opts["method"], opts["rank_deficient"], degree, 1)
+    inp, cutoff = prepare_inputs("fit_log_polynomial", u, v, values, w, mask, cutoff_deg=cutoff_deg)
+    m = n_terms(vs.k, degree, interactions)
+    check_parameter_count(f"degree={degree}, interactions={interactions}, variables={vs.name!r}", m, inp.n,
+                          inp.values.dtype.itemsize)
+    n = inp.n
+    stream = use_stream(n, m, 1, opts["method"], True, is_concrete(inp, u, v, w, mask))
+    mk = None if mask is None or np.ndim(mask) == 1 else jnp.asarray(mask).reshape(-1, n)
+    out = _shared_kernel(inp, u, v, w.reshape(-1, n), mask if mk is None else mk, variables=vs.name, degree=degree,
+                         basis=opts["basis"], interactions=interactions, method=opts["method"], rcond=opts["rcond"],
+                         cutoff_deg=cutoff, stream=stream, **gn)
+    model = PolynomialBRDF(**{k: a.reshape(inp.batch + a.shape[1:]) for k, a in out.items()}, variables=vs.name,
+                           basis=opts["basis"], interactions=interactions, max_degree=degree, link="log",
+                           eps=gn["eps"])
+    return _raise_on_status(model) if opts["rank_deficient"] == "error" else model
+
+
+def _dense_design(x, keep, active, *, degree, basis, interactions, method, rcond):
+    """The shared design held whole (differentiable): ``(fit, values_at)``, ``fit(y, w, w cos^2)`` one lane's
+    solve as :func:`polyjax.fit_polynomial` makes it (its outputs as ``polyjax._fit._lane``'s, without the degree
+    axis) and ``values_at(coef (B, m))`` the polynomial at every sample, ``(B, n)``."""
+    pca, centre, hw, d = fitted_design(x, keep, degree, basis, interactions)
+
+    def fit(y, wl, wc2l):
+        sol = weighted_lstsq(d, y[:, None], wc2l, active, method=method, rcond=rcond)
+        c = sol.coefficients[:, 0]
+        l2 = _residual_l2(d, c, y, wl, wc2l)
+        return (pca.mean, pca.rotation, centre, hw), c, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(wl > 0)
+
+    return fit, lambda coef: (d @ coef.T).T
+
+
+def _streamed_design(x, keep, active, *, degree, basis, interactions, method, rcond):
+    """:func:`_dense_design` streamed: every solve :func:`polyjax.fit_polynomial`'s streamed fit of one lane
+    (:func:`polyjax._stream.stream_geometry`, :func:`polyjax._stream.streamed_lane`; the dense solve where a
+    Cholesky factor fails), and the polynomial's values made a block of rows at a time, the design never held."""
+    lane = functools.partial(_lane, active=active[None], max_degree=degree, basis=basis, interactions=interactions,
+                             method=method, rcond=rcond)
+    opts = dict(max_degree=degree, basis=basis, interactions=interactions)
+
+    def fit(y, wl, wc2l):
+        geo = stream_geometry(x, wl, wc2l, active[None], **opts)
+        out = streamed_lane(geo, y[None], active[None], rcond=rcond, dense=lambda: lane(y[None], wl, wc2l, x), **opts)
+        tr, coef, l2, rank, cond, n_act, n_used = out
+        return tr, coef[0, 0], l2[0, 0], rank[0], cond[0], n_act[0], n_used
+
+    t = _scaled_components(x, keep, keep, basis)[3]
+
+    def values_at(coef):
+        def block(t_b):
+            return (jnp.matmul(coef, _design_t(t_b.T, degree, basis, interactions), precision="highest"),), ()
+
+        return _stream_map(block, t.shape[1], BLOCK, (t.T,))[0][0]
+
+    return fit, values_at
+
+
+@functools.partial(jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond",
+                                             "cutoff_deg", "eps", "steps", "floor", "start_power", "stream"))
+def _shared_kernel(inp, u, v, w, mask, *, variables, degree, basis, interactions, method, rcond, cutoff_deg, eps,
+                   steps, floor, start_power, stream) -> dict:
+    """The solves of :func:`_gauss_newton` on one design shared by the ``B`` lanes of ``inp`` (the same arithmetic:
+    each solve that of :func:`polyjax.fit_polynomial`, lane by lane, ``jax.lax.map``: under ``vmap`` the streamed
+    solve's conditionals would run both branches, its dense fallback included); ``u, v, w (B, n), mask`` as
+    :func:`_gauss_newton` has them;
+    ``stream``: :func:`_streamed_design`, else :func:`_dense_design`. Returns the fields of
+    :class:`polyjax.PolynomialBRDF` as ``(B, ...)`` arrays."""
+    values = inp.values
+    keep, wc2 = fit_weights(u, v, w, mask, cutoff_deg)
+    keep = keep > 0  # the fitted samples; the model may overflow elsewhere
+    x = get_variables(variables).fn(inp.u, inp.v)
+    active = jnp.asarray(term_degrees(x.shape[-1], degree, interactions)) <= degree
+    fit, values_at = (_streamed_design if stream else _dense_design)(
+        x, fit_weights(inp.u, inp.v, inp.weights[0], inp.mask[0], cutoff_deg)[0] > 0, active, degree=degree,
+        basis=basis, interactions=interactions, method=method, rcond=rcond)
+
+    def solve(target, wt):
+        ok = keep & jnp.isfinite(target) & jnp.isfinite(wt)
+        wl, wc2l = fit_weights(inp.u, inp.v, jnp.where(ok, wt, 0.0), inp.mask, cutoff_deg)
+        tr, *fitted = jax.lax.map(lambda a: fit(*a), (jnp.where(ok, target, 0.0), wl, wc2l))
+        out = _outputs(inp, jnp.asarray([degree], jnp.int32), tuple(a[None] for a in tr), *(a[None] for a in fitted))
+        return {k: a[0] for k, a in out.items()}
+
+    def predict(coef):  # the model at the samples, 0 off the fitted ones (where it may overflow)
+        p = jnp.where(keep, values_at(coef), 0.0)
+        return jnp.where(keep, jnp.exp(p) - eps, 0.0)
+
+    def score(coef):
+        return l2_error(values, predict(coef), u, v, w, cutoff_deg, mask)
+
+    b = jnp.maximum(values, 0.0) + eps
+    rms = jnp.sqrt(jnp.sum(wc2 * b * b, -1, keepdims=True) / jnp.maximum(jnp.sum(wc2, -1, keepdims=True), 1e-300))
+    fl2 = (floor * rms) ** 2
+    start = (jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power))
+
+    def solve_step(i, carry):  # i = 0: the log-space start; then the Gauss-Newton steps (one solve, compiled once)
+        model, l2 = carry
+        f = predict(model["coefficients"])
+        g = jnp.maximum(f + eps, jnp.finfo(values.dtype).tiny)
+        first = i == 0
+        step = solve(jnp.where(first, start[0], jnp.log(g) + (values - f) / g),
+                     jnp.where(first, start[1], w * jnp.maximum(g * g, fl2)))
+        return jax.lax.cond(first, lambda: (step, score(step["coefficients"])),
+                            lambda: _line_search(model, step, l2, score))
+
+    blank = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(solve, *start))
+    model, l2 = jax.lax.fori_loop(0, steps + 1, solve_step, (blank, jnp.zeros(values.shape[:1], values.dtype)))
+    return dict(model, l2=l2)
+
+
+def _line_search(model: dict, step: dict, l2, score):
+    """Lane-wise the best of ``model`` (L2 ``l2``) and the steps towards ``step`` of :data:`STEP_LENGTHS` by
+    ``score`` (each candidate compared with the best so far, as :func:`_gauss_newton` does): ``(model, l2)``."""
+    for t in STEP_LENGTHS:
+        cand = dict(step, coefficients=model["coefficients"] + t * (step["coefficients"] - model["coefficients"]))
+        l2_c = score(cand["coefficients"])
+        better = l2_c < l2
+        model = _select(better, cand, model)
+        l2 = jnp.where(better, l2_c, l2)
+    return model, l2
+
 def _as_log(model: PolynomialBRDF, eps: float) -> PolynomialBRDF:
     return PolynomialBRDF(**{k: getattr(model, k) for k in _FIELDS}, variables=model.variables, basis=model.basis,
                           interactions=model.interactions, max_degree=model.max_degree, link="log", eps=eps)
@@ -183,7 +346,7 @@ def _blend(a: PolynomialBRDF, b: PolynomialBRDF, t: float) -> PolynomialBRDF:
 
 
 def _select(better, a: PolynomialBRDF, b: PolynomialBRDF) -> PolynomialBRDF:
-    """Lane-wise ``a`` where ``better`` else ``b``."""
+    """Lane-wise ``a`` where ``better`` else ``b`` (models, or dicts of their fields)."""
     def pick(x, y):
         cond = jnp.reshape(better, better.shape + (1,) * (x.ndim - better.ndim))
         return jnp.where(cond, x, y)
