@@ -272,16 +272,7 @@ def model_metadata(path: str | os.PathLike) -> dict:
         DataNotFoundError: no such file. DataFormatError: not a saved model.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataNotFoundError(f"{str(path)!r}: no such model file")
-    try:
-        if path.suffix == ".json":
-            meta = json.loads(path.read_text())
-        else:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["__meta__"]))
-    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
-        raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
+    meta, _ = _read_file(path, arrays=False)
     if not isinstance(meta, dict) or meta.get("format") not in (FORMAT, FORMAT_V1):
         raise DataFormatError(path, f"format {FORMAT!r} (or {FORMAT_V1!r})", repr(meta.get("format") if
                                                                                   isinstance(meta, dict) else meta))
@@ -309,6 +300,32 @@ def _write_whole(path: Path, write) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def _read_file(path: Path, arrays: bool) -> tuple:
+    """``(header, arrays)`` of a model file written by :func:`save_model` (``arrays`` empty unless asked for; an
+    ``.npz``'s header alone is read without its arrays).
+
+    Raises:
+        DataNotFoundError: no such file. DataFormatError: unreadable content.
+    """
+    if not path.is_file():
+        raise DataNotFoundError(f"{str(path)!r}: no such model file")
+    out = {}
+    try:
+        if path.suffix == ".json":
+            meta = json.loads(path.read_text())
+            if arrays and isinstance(meta, dict) and isinstance(meta.get("arrays"), dict):
+                out = {k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"])
+                       for k, v in meta["arrays"].items()}
+        else:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["__meta__"]))
+                if arrays:
+                    out = {k: z[k] for k in z.files if k != "__meta__"}
+    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
+        raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
+    return meta, out
+
+
 def load_model(path: str | os.PathLike):
     """Read a model written by :func:`save_model` (any version); it evaluates identically.
 
@@ -317,22 +334,7 @@ def load_model(path: str | os.PathLike):
         arrays. UnknownNameError: its kind is provided by a package that is not installed.
     """
     path = Path(path)
-    if not path.is_file():
-        raise DataNotFoundError(f"{str(path)!r}: no such model file")
-    try:
-        if path.suffix == ".json":
-            meta = json.loads(path.read_text())
-            arrays = {}
-            if isinstance(meta, dict) and isinstance(meta.get("arrays"), dict):
-                arrays = {
-                    k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"]) for k, v in meta["arrays"].items()
-                }
-        else:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["__meta__"]))
-                arrays = {k: z[k] for k in z.files if k != "__meta__"}
-    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
-        raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
+    meta, arrays = _read_file(path, arrays=True)
     fmt = meta.get("format") if isinstance(meta, dict) else meta
     if fmt == FORMAT_V1:
         kind_name, static = POLYNOMIAL_KIND.kind, {k: meta.get(k) for k in _STATIC_V1}
