@@ -1,4 +1,4 @@
-"""The slow tier: the tests that README's command leaves out and ``python -m pytest -q -m slow`` runs (CI runs both).
+"""The slow tier: the tests that README's command leaves out and ``python -m pytest -q -m slow`` runs.
 
 Every test that took over 5 seconds in one full run of the suite (2-core machine, 2026-12-01, the other core partly
 busy; times below), besides those decorated ``@pytest.mark.slow`` in their files. Mostly the first test of a file to
