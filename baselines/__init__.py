@@ -36,6 +36,7 @@ from ._multistart import BACKENDS, residuals
 from ._published import published, published_materials
 from ._result import BaselineFit, standard_material
 from ._saving import KIND as SAVED_MODEL_KIND
+from ._solver import MultiStart
 from ._starts import initial_guesses
 
 
@@ -47,7 +48,7 @@ def __getattr__(name):
 
 
 __all__ = [
-    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "MODELS", "NONLINEAR_MODELS",
+    "BACKENDS", "SAVED_MODEL_KIND", "BaselineFit", "BaselineModel", "MODELS", "MultiStart", "NONLINEAR_MODELS",
     "PAPER_MODELS", "Transform", "abc", "ashikhmin_shirley", "blinn_phong", "cook_torrance", "disk_point", "fit",
     "fit_to_images", "get_model", "initial_guesses", "lafortune", "lafortune_anisotropic", "n_zernike_terms",
     "oren_nayar", "published", "published_materials", "residuals", "sgd", "ward", "ward_anisotropic", "ward_duer",

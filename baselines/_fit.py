@@ -28,6 +28,7 @@ continues the single best start: on the 52 CUReT samples x 7 models it changes t
 from __future__ import annotations
 
 import functools
+import inspect
 
 import jax
 import jax.numpy as jnp
@@ -37,16 +38,16 @@ import polyjax as pj
 from polyjax import RESULTS, InputError
 from polyjax.internal import is_concrete, one_lapack_thread, prepare_inputs, raise_on_status
 
+from . import _jaxopt
 from ._aot import fit_saved
 from ._fit_joint import check_channels, fit_joint
 from ._implicit import implicit_optimum
-from ._jaxopt import staged_kernel
 from ._models.joint import SUFFIX
 from ._models.registry import get_model
 from ._models.zernike import fit_zernike
-from ._multistart import BACKENDS, fit_kernel
+from ._multistart import fit_kernel
 from ._result import BaselineFit
-from ._starts import check_n_starts
+from ._solver import SOLVER_FIELDS, MultiStart, solver_of
 
 
 @one_lapack_thread
@@ -72,6 +73,7 @@ def fit(
     order: int = 8,
     nonfinite: str = "error",
     throw: bool = False,
+    solver: MultiStart | None = None,
 ) -> BaselineFit:
     r"""Fit a baseline BRDF model to measurements, every lane (material, channel) in one batched call. (Over 80
     lines because this docstring documents every argument; the body is named steps: checks,
@@ -110,6 +112,9 @@ def fit(
             ``NONFINITE``) or ``"mask"`` (drop those samples), as in :func:`polyjax.fit_polynomial`.
         throw: raise :class:`polyjax.FitError` naming the first lane whose status is not ``OK``; under ``jit``
             an :func:`equinox.error_if` error with that code's message.
+        solver: the solver's settings as one value (:class:`baselines.MultiStart`: ``n_starts``, ``backend``,
+            ``max_steps``, ``rtol``, ``atol``, ``stage_steps``, ``refine``, ``limit_steps``), instead of those
+            keywords; keywords that differ from it are refused.
 
     Inputs follow the rules every fitter shares (:func:`polyjax.prepare_inputs`), so the input preparation also
     runs under ``jit``.
@@ -141,10 +146,11 @@ def fit(
         :class:`BaselineFit` with batch shape ``values.shape[:-1]``. A lane whose kept start did not
         converge has ``success = False`` and its :class:`polyjax.RESULTS` code; parameters are never NaN.
     """
+    solver = solver_of("fit", solver, _SOLVER_DEFAULTS, n_starts=n_starts, backend=backend, max_steps=max_steps,
+                       rtol=rtol, atol=atol, stage_steps=stage_steps, refine=refine, limit_steps=limit_steps)
+    n_starts, backend, max_steps, rtol, atol, stage_steps, refine, limit_steps = (
+        getattr(solver, k) for k in SOLVER_FIELDS)
     model = get_model(name)
-    if backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, found {backend!r}")
-    check_n_starts(n_starts)
     options = dict(cutoff_deg=cutoff_deg, n_starts=n_starts, backend=backend, max_steps=max_steps, rtol=rtol, atol=atol,
                    stage_steps=stage_steps, refine=refine, limit_steps=limit_steps, order=order, nonfinite=nonfinite)
     saved = fit_saved(fit, model.name, u, v, values, weights, mask, starts, key, throw, options)  # baselines/_aot.py
@@ -160,7 +166,7 @@ def fit(
         if joint:
             check_channels(model, tuple(inp.batch))
         raw0 = _check_starts(get_model(model.name + SUFFIX) if joint else model, starts, inp.values.dtype,
-                             tuple(inp.batch[:-1]) if joint else inp.batch, max_steps, limit_steps)
+                             tuple(inp.batch[:-1]) if joint else inp.batch)
         opts = dict(
             n_starts=int(n_starts if raw0 is None else raw0.shape[1]), max_steps=int(max_steps), rtol=float(rtol),
             atol=float(atol), stage_steps=int(min(stage_steps, max_steps)),
@@ -171,13 +177,20 @@ def fit(
     return _result(model, backend, inp, out, throw)
 
 
+#: the keyword defaults of :func:`fit` that :class:`MultiStart` groups
+_SOLVER_DEFAULTS = {k: inspect.signature(fit).parameters[k].default for k in SOLVER_FIELDS}
+
+
 def _fit_nonlinear(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> dict:
     """The multi-start kernel of ``backend`` on constants, then the kept optimum with its implicit derivative:
     a dict of ``(B, ...)`` arrays, the fields of :class:`BaselineFit`."""
     sg = jax.lax.stop_gradient  # the solver loops see constants; the optimum differentiates implicitly
     args = (model.name, sg(inp.u), sg(inp.v), sg(inp.values), sg(wl), sg(wc2),
             jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
-    out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
+    if backend == "optimistix":
+        out = fit_kernel(*args, **opts)
+    else:  # loaded on first use (baselines/_jaxopt/__init__.py)
+        out = _jaxopt.staged_kernel(*args, backend=backend, **opts)
     out["raw"], out["params"], out["l2"] = _package(model.name, out["raw"], inp.u, inp.v, inp.values, wl, wc2)
     out["success"] = (out["status"] == RESULTS.OK) & jnp.isfinite(out["l2"])
     return out
@@ -213,12 +226,9 @@ def _package(name, raw, u, v, y, wl, wc2):
     return raw, params, pj.l2_error(y, pred, u, v, weights=wl, cutoff_deg=None, mask=wc2 > 0)
 
 
-def _check_starts(model, starts, dtype, batch, max_steps, limit_steps):
-    """The step limits and ``starts`` of a nonlinear fit; ``starts`` as ``(B, S, P)`` (or None)."""
-    if not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
-        raise InputError(f"max_steps: expected a positive integer, found {max_steps!r}")
-    if not isinstance(limit_steps, (int, np.integer)) or limit_steps < 0:
-        raise InputError(f"limit_steps: expected a non-negative integer, found {limit_steps!r}")
+def _check_starts(model, starts, dtype, batch):
+    """``starts`` of a nonlinear fit as ``(B, S, P)`` (or None); the step limits are checked by
+    :class:`baselines.MultiStart`."""
     if starts is None:
         return None
     raw0 = jnp.asarray(starts, dtype)

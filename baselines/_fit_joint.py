@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import polyjax as pj
 from polyjax import RESULTS, InputError
 
+from . import _jaxopt
 from ._implicit import implicit_optimum
-from ._jaxopt import staged_kernel
 from ._models.joint import SUFFIX, channel_index, joint_lanes, per_channel
 from ._models.registry import get_model
 from ._multistart import fit_kernel
@@ -35,7 +35,10 @@ def fit_joint(model, inp, wl, wc2, key, raw0, backend: str, opts: dict) -> dict:
     y, wlj, wc2j = joint_lanes(inp.values, wl, wc2)
     args = (model.name + SUFFIX, sg(inp.u), sg(inp.v), sg(y), sg(wlj), sg(wc2j),
             jax.random.PRNGKey(0) if key is None else key, None if raw0 is None else sg(raw0))
-    out = fit_kernel(*args, **opts) if backend == "optimistix" else staged_kernel(*args, backend=backend, **opts)
+    if backend == "optimistix":
+        out = fit_kernel(*args, **opts)
+    else:  # loaded on first use (baselines/_jaxopt/__init__.py)
+        out = _jaxopt.staged_kernel(*args, backend=backend, **opts)
     return _package(model.name, out, inp.u, inp.v, inp.values, jnp.broadcast_to(wl, inp.values.shape),
                     jnp.broadcast_to(wc2, inp.values.shape))
 

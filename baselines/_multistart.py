@@ -13,7 +13,7 @@ loop is traced and compiled once per (model, shapes) whatever the stages:
   :data:`_LIMIT_TOLS` (``ceil(2 / R)`` jobs), ``limit_steps`` steps for lanes that need it and 0 for the others.
 
 A job's work is that of its block, so the stages cost what separate solves of the same sizes cost; the jaxopt
-backend keeps its own staged kernel (:mod:`baselines._jaxopt`).
+backend keeps its own staged kernel (:mod:`baselines._jaxopt.staged`).
 """
 
 from __future__ import annotations

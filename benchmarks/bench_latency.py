@@ -82,7 +82,7 @@ if mode == "scipy":
 else:
     if mode == "staged":  # the previous kernel: one traced solver loop per stage
         import baselines._fit as F
-        from baselines._jaxopt import staged_kernel
+        from baselines._jaxopt.staged import staged_kernel
         F.fit_kernel = lambda *a, **k: staged_kernel(*a, backend="optimistix", **k)
     t1 = time.perf_counter()
     f = bl.fit(name, data, n_starts=16)

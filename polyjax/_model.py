@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from typing import Sequence
 
 import equinox as eqx
 import jax
@@ -12,11 +13,119 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from numpy.polynomial import legendre, polynomial
 
 from ._arrays import is_traced
-from ._basis import design_matrix, exponents, n_terms
+from ._basis import BASES, design_matrix, exponents, n_terms
 from ._directions import safe_normalize
 from ._errors import InputError
 from ._results import RESULTS
 from ._variables import get_variables
+
+#: the links of a polynomial model: equation (3) itself, or ``f = exp(P) - eps`` (:mod:`polyjax._fit.log`)
+LINKS = ("identity", "log")
+#: the fields of :class:`PolynomialSpec`, in order: the model's definition wherever it is given by keyword
+SPEC_FIELDS = ("variables", "degree", "basis", "interactions", "link", "eps")
+
+
+class PolynomialSpec(eqx.Module):
+    r"""The definition of a polynomial BRDF model, apart from the numbers a fit finds: a frozen, hashable value.
+
+    The model is ``f = P`` (equation (3); equation (2) with ``interactions``) or, with ``link="log"``,
+    ``f = exp(P) - eps``, where ``P`` is a polynomial of degree ``degree`` in the principal components of the
+    explanatory variables ``variables`` (section 3), written in ``basis``. One definition serves every place that
+    names a model: the fitters (``spec=`` of :func:`polyjax.fit_polynomial`, :func:`polyjax.fit_log_polynomial`,
+    :func:`polyjax.fit_polynomial_to_images`, equal to their keyword arguments of the same names), a fitted model
+    (:attr:`PolynomialBRDF.spec`), a saved model (the same fields, by name, in the file's header: ``docs/formats.md``)
+    and the command line (``--variables --degree --basis --interactions --link --eps``).
+
+    Attributes:
+        variables: a registered variable set (stored by its canonical name: ``"as"`` becomes
+            ``"ashikhmin-shirley"``).
+        degree: ``p``, or a tuple of degrees (fitted at once, a leading degree axis; the log link takes one).
+        basis: ``"legendre"`` (scaled Legendre polynomials, well conditioned) or ``"monomial"`` (the paper's powers).
+        interactions: the full response surface of equation (2) instead of equation (3).
+        link: ``"identity"`` or ``"log"``.
+        eps: the log link's offset in 1/sr (``f >= -eps``); unused by the identity link.
+
+    Raises:
+        InputError, UnknownNameError: a field that is not one of the values above, naming the field.
+    """
+
+    variables: str = eqx.field(static=True)
+    degree: int | tuple[int, ...] = eqx.field(static=True)
+    basis: str = eqx.field(static=True)
+    interactions: bool = eqx.field(static=True)
+    link: str = eqx.field(static=True)
+    eps: float = eqx.field(static=True)
+
+    def __init__(self, variables: str = "lafortune", degree: int | Sequence[int] = 5, basis: str = "legendre",
+                 interactions: bool = False, link: str = "identity", eps: float = 1e-3):
+        self.variables = get_variables(variables).name
+        self.degree = _spec_degree(degree)
+        if basis not in BASES:
+            raise InputError(f"basis: expected one of {BASES}, found {basis!r}")
+        self.basis = basis
+        if not isinstance(interactions, (bool, np.bool_)):
+            raise InputError(f"interactions: expected True or False, found {interactions!r}")
+        self.interactions = bool(interactions)
+        if link not in LINKS:
+            raise InputError(f"link: expected one of {LINKS}, found {link!r}")
+        self.link = link
+        if isinstance(eps, bool) or not isinstance(eps, (int, float, np.floating, np.integer)) or not (
+                np.isfinite(eps) and eps > 0):
+            raise InputError(f"eps: expected a positive offset in 1/sr, found {eps!r}")
+        self.eps = float(eps)
+
+    @property
+    def n_parameters(self) -> int | tuple[int, ...]:
+        """``k p + 1`` (equation (3)) or ``C(k + p, p)`` (equation (2)): one number, or one per degree."""
+        k = get_variables(self.variables).k
+        if isinstance(self.degree, tuple):
+            return tuple(n_terms(k, p, self.interactions) for p in self.degree)
+        return n_terms(k, self.degree, self.interactions)
+
+    def to_dict(self) -> dict:
+        """The fields as JSON values (``degree`` a list when several)."""
+        return {f: (list(v) if isinstance(v, tuple) else v) for f in SPEC_FIELDS for v in [getattr(self, f)]}
+
+    @classmethod
+    def from_dict(cls, fields: dict) -> "PolynomialSpec":
+        """The definition :meth:`to_dict` wrote (missing fields take their defaults; unknown keys are refused)."""
+        unknown = sorted(set(fields) - set(SPEC_FIELDS))
+        if unknown:
+            raise InputError(f"PolynomialSpec: unknown fields {unknown}; expected some of {list(SPEC_FIELDS)}")
+        return cls(**fields)
+
+
+def _spec_degree(degree) -> int | tuple[int, ...]:
+    """One non-negative integer, or a non-empty tuple of them (the message of the fitters' own check)."""
+    degrees = np.atleast_1d(np.asarray(degree))
+    if (isinstance(degree, bool) or degrees.ndim != 1 or degrees.size == 0
+            or not np.issubdtype(degrees.dtype, np.integer) or np.any(degrees < 0)):
+        raise InputError(f"degree: expected a non-negative integer or a sequence of them, found {degree!r}")
+    return int(degrees[0]) if np.ndim(degree) == 0 else tuple(int(p) for p in degrees)
+
+
+def spec_of(fn: str, spec, defaults: dict, **given) -> PolynomialSpec:
+    """The model definition of a call of the fitter ``fn``: ``spec`` if given (a :class:`PolynomialSpec`), else
+    made of the keyword arguments ``given`` (``variables=..., degree=...``). Keyword arguments that differ from
+    their ``defaults`` and from ``spec`` are refused: the definition is given one way or the other."""
+    if spec is None:
+        return PolynomialSpec(**given)
+    if not isinstance(spec, PolynomialSpec):
+        raise InputError(f"{fn}: spec: expected a polyjax.PolynomialSpec, found {type(spec).__name__}")
+    given = dict(given, variables=get_variables(given["variables"]).name)
+    defaults = dict(defaults, variables=get_variables(defaults["variables"]).name)
+    clash = [k for k, x in given.items() if not _same(x, defaults[k]) and not _same(x, getattr(spec, k))]
+    if clash:
+        both = ", ".join(f"{k}={given[k]!r} and spec.{k}={getattr(spec, k)!r}" for k in clash)
+        raise InputError(f"{fn}: the model's definition is given twice, found {both}: pass spec= or keywords")
+    return spec
+
+
+def _same(a, b) -> bool:
+    """Equal as definitions: ``7``, ``[7]`` and ``(7,)`` differ (one degree, or a degree axis)."""
+    if isinstance(a, (str, bool, float, int)) or isinstance(b, (str, bool, float, int)):
+        return type(a) is type(b) and a == b if isinstance(a, str) or isinstance(b, str) else a == b
+    return np.shape(a) == np.shape(b) and bool(np.all(np.asarray(a) == np.asarray(b)))
 
 
 class PolynomialBRDF(eqx.Module):
@@ -76,6 +185,13 @@ class PolynomialBRDF(eqx.Module):
         if not is_traced(self.degree):  # no compiled program for a table look-up
             return table[np.asarray(self.degree)]
         return jnp.asarray(table)[self.degree]
+
+    @property
+    def spec(self) -> PolynomialSpec:
+        """The model's definition (:class:`PolynomialSpec`): its variables, basis, interactions, link (with ``eps``)
+        and highest degree ``max_degree`` (a fit of several degrees gives the highest; ``degree`` holds each lane's)."""
+        return PolynomialSpec(self.variables, self.max_degree, self.basis, self.interactions, self.link,
+                              self.eps if self.link == "log" else 1e-3)
 
     @property
     def ok(self) -> Array:
@@ -159,7 +275,7 @@ def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:
     return design_matrix(z, degree, "monomial", False) @ jnp.asarray(beta)
 
 
-__all__ = ["PolynomialBRDF", "evaluate_paper_form", "exponents"]
+__all__ = ["PolynomialBRDF", "PolynomialSpec", "evaluate_paper_form", "exponents"]
 
 
 @jax.jit

@@ -45,6 +45,7 @@ interactions) the shared program is the per-solve calls' result to 3e-14 (coeffi
 from __future__ import annotations
 
 import functools
+import inspect
 
 import jax
 import jax.numpy as jnp
@@ -58,7 +59,7 @@ from .._errors import InputError
 from .._inputs import check_parameter_count, prepare_inputs
 from .._measurements import Measurements
 from .._metrics import fit_weights, l2_error
-from .._model import PolynomialBRDF
+from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
 from .._solve.lstsq import weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
@@ -90,6 +91,7 @@ def fit_log_polynomial(
     method: str = "qr",
     rcond: float | None = None,
     rank_deficient: str = "flag",
+    spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     """Fit ``f = exp(P) - eps`` to minimise equation (11) by ``1 + steps`` weighted linear solves (module docs).
 
@@ -108,6 +110,8 @@ def fit_log_polynomial(
         start_power: ``q`` of the log-space start's weights ``(b + eps)^q`` (module docs).
         weights, mask, cutoff_deg, basis, method, rcond, rank_deficient: as :func:`polyjax.fit_polynomial`.
         interactions: the full response surface of equation (2) (default), or equation (3) with False.
+        spec: the model's definition as one value (:class:`polyjax.PolynomialSpec` with ``link="log"``), instead
+            of ``variables``, ``degree``, ``basis``, ``interactions`` and ``eps``.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with ``link="log"`` and ``eps``; its ``l2`` is equation (11) of
@@ -115,6 +119,13 @@ def fit_log_polynomial(
         Differentiable with respect to ``values``, ``weights`` and directions wherever
         :func:`polyjax.fit_polynomial` is (the step choice is piecewise constant).
     """
+    if isinstance(u, Measurements) and isinstance(v, str):  # fit_log_polynomial(data, "rusinkiewicz")
+        u, v, variables = u, None, v
+    spec = spec_of("fit_log_polynomial", spec, _SPEC_DEFAULTS, variables=variables, degree=degree, basis=basis,
+                   interactions=interactions, link="log", eps=eps)
+    if spec.link != "log":
+        raise InputError(f"spec: expected link='log' for fit_log_polynomial, found {spec.link!r}")
+    variables, degree, basis, interactions, eps = spec.variables, spec.degree, spec.basis, spec.interactions, spec.eps
     u, v, values, w, mask, variables, eps, shared = _check_inputs(u, v, values, variables, degree, eps, steps,
                                                                   weights, mask)
     opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
@@ -123,6 +134,11 @@ def fit_log_polynomial(
     if shared or _same_samples(u, v, w, mask, cutoff_deg):
         return _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
     return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
+
+
+#: the keyword defaults of :func:`fit_log_polynomial` that :class:`polyjax.PolynomialSpec` groups
+_SPEC_DEFAULTS = {k: inspect.signature(fit_log_polynomial).parameters[k].default if k != "link" else "log"
+                  for k in SPEC_FIELDS}
 
 
 def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):

@@ -3,13 +3,15 @@ closed form (:mod:`polyjax._fit.closed_form`) or the log-space fit built on it (
 
 from __future__ import annotations
 
+import inspect
 from typing import Sequence
 
 from jaxtyping import ArrayLike
 
 from .._basis import n_terms
 from .._errors import InputError
-from .._model import PolynomialBRDF
+from .._measurements import Measurements
+from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from .closed_form import LANE_BLOCK, fit_closed_form
@@ -38,6 +40,7 @@ def fit_polynomial(
     link: str = "identity",
     eps: float = 1e-3,
     steps: int = 3,
+    spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form. (Over 80 lines because
     this docstring documents every argument; the body dispatches on the link: the closed form,
@@ -91,6 +94,9 @@ def fit_polynomial(
         link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
            weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
            is equation (3) itself.
+        spec: the model's definition as one value (:class:`polyjax.PolynomialSpec`: ``variables``, ``degree``,
+           ``basis``, ``interactions``, ``link``, ``eps``), instead of those keywords; e.g. a fitted model's
+           ``.spec`` to fit the same family to other data. Keywords that differ from it are refused.
 
     Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
     e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
@@ -100,15 +106,23 @@ def fit_polynomial(
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
         degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.RESULTS` codes.
     """
-    if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_fit/log.py
-        if link != "log" or nonfinite != "error":
-            raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
-        return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
-                                  cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
-                                  rcond=rcond, rank_deficient=rank_deficient)
-    return fit_closed_form(u, v, values, variables, degree, weights=weights, mask=mask, cutoff_deg=cutoff_deg,
-                           basis=basis, interactions=interactions, method=method, rcond=rcond,
-                           rank_deficient=rank_deficient, nonfinite=nonfinite, throw=throw, lane_block=lane_block)
+    if isinstance(u, Measurements) and isinstance(v, str):  # fit_polynomial(data, "ward", degree=3)
+        u, v, variables = u, None, v
+    spec = spec_of("fit_polynomial", spec, _SPEC_DEFAULTS, variables=variables, degree=degree, basis=basis,
+                   interactions=interactions, link=link, eps=eps)
+    if spec.link == "log":  # log-space model f = exp(poly) - eps: polyjax/_fit/log.py
+        if nonfinite != "error":
+            raise InputError(f"nonfinite: the log link takes 'error' only (mask bad samples), found {nonfinite!r}")
+        return fit_log_polynomial(u, v, values, spec=spec, steps=steps, weights=weights, mask=mask,
+                                  cutoff_deg=cutoff_deg, method=method, rcond=rcond, rank_deficient=rank_deficient)
+    return fit_closed_form(u, v, values, spec.variables, spec.degree, weights=weights, mask=mask,
+                           cutoff_deg=cutoff_deg, basis=spec.basis, interactions=spec.interactions, method=method,
+                           rcond=rcond, rank_deficient=rank_deficient, nonfinite=nonfinite, throw=throw,
+                           lane_block=lane_block)
+
+
+#: the keyword defaults of :func:`fit_polynomial` that :class:`PolynomialSpec` groups
+_SPEC_DEFAULTS = {k: inspect.signature(fit_polynomial).parameters[k].default for k in SPEC_FIELDS}
 
 
 def n_parameters(variables: str, degree: int, interactions: bool = False) -> int:

@@ -1,5 +1,6 @@
-"""What every command shares: the options of every command (data root, cache), degrees, dataset specs,
-the samples a fit keeps, the image options of ``render`` and ``view``, strict JSON output."""
+"""What every command shares: the options of every command (data root, cache), the polynomial model's definition
+(``--variables --degree --basis --interactions --link --eps``: one :class:`polyjax.PolynomialSpec`), degrees, dataset
+specs, the samples a fit keeps, the image options of ``render`` and ``view``, strict JSON output."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ import polyjax as pj
 
 from .._basis import n_terms
 from .._config import configured_data_root
-from .._errors import InputError
+from .._errors import InputError, UnknownNameError
+from .._model import LINKS, PolynomialSpec
 from .._variables import get_variables
 
 #: the built-in variable sets (pj.variable_sets() without importing JAX to print --help)
@@ -42,6 +44,43 @@ def add_image_options(p: argparse.ArgumentParser, size_help: str, exposure_help:
     """``--size`` (pixels, default 256) and ``--exposure`` (stops, default 0) of the commands that make images."""
     p.add_argument("--size", type=int, default=256, help=size_help)
     p.add_argument("--exposure", type=float, default=0.0, help=exposure_help)
+
+
+def add_model_options(p: argparse.ArgumentParser, defaults: PolynomialSpec, *, several: bool = False) -> None:
+    """The polynomial model's definition on ``p``, with the command's ``defaults``: ``--variables``, ``--degree``
+    (``--degrees``; comma-separated degrees when ``several``), ``--basis``, ``--interactions`` /
+    ``--no-interactions``, ``--link``, ``--eps``; :func:`spec_from_args` reads them back."""
+    degrees = ",".join(map(str, defaults.degree)) if isinstance(defaults.degree, tuple) else str(defaults.degree)
+    p.add_argument("--variables", default=defaults.variables,
+                   help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES)
+                   + f" (default {defaults.variables})")
+    p.add_argument("--degree", "--degrees", dest="degree", default=degrees,
+                   help="polynomial degree p" + (", or comma-separated degrees fitted in one batch (e.g. 2,3,5)"
+                                                 if several else "") + f"; default {degrees}")
+    p.add_argument("--basis", default=defaults.basis, choices=["legendre", "monomial"],
+                   help=f"basis of the solve: scaled Legendre (well conditioned) or the paper's monomials "
+                   f"(default {defaults.basis})")
+    p.add_argument("--interactions", action=argparse.BooleanOptionalAction, default=defaults.interactions,
+                   help="the full response surface of equation (2), or equation (3) with --no-interactions "
+                   f"(default: {'with' if defaults.interactions else 'without'})")
+    p.add_argument("--link", default=defaults.link, choices=list(LINKS),
+                   help="identity: the closed-form fit of equation (3); log: f = exp(P) - eps, fitted by a few "
+                   f"Gauss-Newton solves (default {defaults.link})")
+    p.add_argument("--eps", type=float, default=defaults.eps,
+                   help=f"the log link's offset in 1/sr (default {defaults.eps:g})")
+
+
+def spec_from_args(args, *, several: bool = False, flag: str = "--degree") -> PolynomialSpec:
+    """The :class:`polyjax.PolynomialSpec` of the options of :func:`add_model_options` (checked: InputError naming
+    the flag; ``flag`` is the degree's, as the command documents it)."""
+    degrees = parse_degrees(args.degree, flag)
+    if len(degrees) > 1 and not several:
+        raise InputError(f"{flag}: expected one degree for this command, found {args.degree!r}")
+    try:
+        return PolynomialSpec(args.variables, degrees[0] if len(degrees) == 1 else tuple(degrees), args.basis,
+                              args.interactions, args.link, args.eps)
+    except (InputError, UnknownNameError) as e:
+        raise type(e)(f"--{e}") from None
 
 
 def load_dataset(args):

@@ -13,8 +13,11 @@ import polyjax as pj
 from .._config import check_model_file
 from .._fit.saved import fit_saved
 from .._io import fitter_for, kind_of
-from ._args import BUILTIN_VARIABLES, check_degrees_fit, load_dataset, parse_degrees, strict_json
+from ._args import add_model_options, check_degrees_fit, load_dataset, spec_from_args, strict_json
 from ._progress import compile_notice, progress_line
+
+#: the model ``polyjax fit`` fits by default: Lafortune's variables, p = 7
+DEFAULT_SPEC = pj.PolynomialSpec("lafortune", 7)
 
 
 def add_parser(sub, common) -> None:
@@ -28,17 +31,9 @@ def add_parser(sub, common) -> None:
                    "merl:<file.binary>, nbrdf:<zip or folder>:<name>, rgl:<file.bsdf>")
     f.add_argument("--model", default="polynomial",
                    help="polynomial (default) or a baseline model, e.g. cook-torrance, ward, lafortune (any name of "
-                   "baselines.MODELS); --variables, --degree, --basis, --interactions apply to the polynomial only")
-    f.add_argument("--variables", default="lafortune",
-                   help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES) + " (default lafortune)")
-    f.add_argument("--link", default="identity", choices=["identity", "log"],
-                   help="identity (default: the closed-form fit of equation (3)) or log: f = exp(P) - eps, fitted by "
-                   "a few Gauss-Newton solves (pj.fit_polynomial(..., link='log'))")
-    f.add_argument("--degree", "--degrees", dest="degree", default="7",
-                   help="polynomial degree p, or comma-separated degrees fitted in one batch (e.g. 2,3,5); default 7")
-    f.add_argument("--basis", default="legendre", choices=["legendre", "monomial"],
-                   help="basis of the solve: scaled Legendre (default, well conditioned) or the paper's monomials")
-    f.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
+                   "baselines.MODELS); --variables, --degree, --basis, --interactions, --link, --eps apply to the "
+                   "polynomial only")
+    add_model_options(f, DEFAULT_SPEC, several=True)
     f.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees (default 80)")
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
@@ -73,9 +68,8 @@ ZERO_MODEL_RATIO = 0.95
 def cmd_fit(args) -> int:
     """Run ``polyjax fit``: fit the model of ``--model`` to the dataset, optionally save it, and report every lane's
     L2, status and coefficients (text, or one JSON object with ``--json``); returns the exit status."""
-
-
-    degrees = parse_degrees(args.degree)
+    spec = spec_from_args(args, several=True)
+    degrees = list(spec.degree) if isinstance(spec.degree, tuple) else [spec.degree]
     degree = degrees[0] if len(degrees) == 1 else degrees
     polynomial = args.model.strip().lower() == "polynomial"
     kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
@@ -83,8 +77,8 @@ def cmd_fit(args) -> int:
         check_model_file(args.save, "--save")
     data, synthetic = load_dataset(args)
     if polynomial:
-        check_degrees_fit(data, args.variables, degrees, args.interactions, args.cutoff, "--degree")
-    model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, degree)
+        check_degrees_fit(data, spec.variables, degrees, spec.interactions, args.cutoff, "--degree")
+    model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, spec)
     out, beta = _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, zero, elapsed)
     if args.save:
         out["saved"] = str(pj.save_model(args.save, model, metadata={"fit_seconds": elapsed, "fit_command": "fit"}))
@@ -97,7 +91,7 @@ def cmd_fit(args) -> int:
     return 0
 
 
-def _run_fit(args, data, kind, model_name, degree):
+def _run_fit(args, data, kind, model_name, spec):
     """The fit of ``polyjax fit`` (``kind`` None: the polynomial) -> ``(model, l2 array, zero-model L2 or None,
     seconds)``. A polynomial fit runs from the executable saved beside the cache when there is one
     (``polyjax/_fit/saved.py``, which also returns the L2 of ``f = 0``), else through :func:`polyjax.fit_polynomial`."""
@@ -106,12 +100,12 @@ def _run_fit(args, data, kind, model_name, degree):
     zero = None
     with compile_notice("the fit", cache), progress_line(f"fitting {model_name}"):
         if kind is None:
-            options = dict(variables=args.variables, degree=degree, basis=args.basis, interactions=args.interactions,
-                           cutoff_deg=args.cutoff)
-            link = getattr(args, "link", "identity")
-            saved = fit_saved(data, cache, **options) if link == "identity" else None
-            options.update({} if link == "identity" else dict(link=link))
-            model, zero = saved if saved is not None else (pj.fit_polynomial(data, **options), None)
+            degree = list(spec.degree) if isinstance(spec.degree, tuple) else spec.degree
+            saved = None if spec.link != "identity" else fit_saved(
+                data, cache, variables=spec.variables, degree=degree, basis=spec.basis,
+                interactions=spec.interactions, cutoff_deg=args.cutoff)
+            model, zero = saved if saved is not None else (pj.fit_polynomial(data, spec=spec,
+                                                                            cutoff_deg=args.cutoff), None)
         else:
             model = kind.fit(model_name, data, cutoff_deg=args.cutoff)
         l2 = np.asarray(model.l2)
@@ -159,6 +153,7 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
     if polynomial and getattr(model, "link", "identity") != "identity":
         out["link"] = model.link
     if polynomial:
+        out["spec"] = model.spec.to_dict()
         out["rank"] = np.asarray(model.rank).tolist()
         out["condition"] = np.asarray(model.condition).tolist()
     return out, beta

@@ -18,7 +18,7 @@ from .._config import check_model_file, check_output_dir
 from .._errors import InputError
 from ..render import Camera, DirectionalLight, Lambertian, Plane, PointLight, Scene, Sphere, load_envmap, read_exr
 from ..render._example_scene import write_example_scene
-from ._args import strict_json
+from ._args import add_model_options, spec_from_args, strict_json
 
 
 def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
@@ -34,9 +34,7 @@ def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     p.add_argument("--example", default=None, metavar="DIR",
                    help="write a ready example (scene.json and three EXR images of a Phong sphere) into DIR and "
                    "exit; then run: polyjax fit-images DIR/scene.json")
-    p.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
-    p.add_argument("--degree", type=int, default=5, help="polynomial degree p (default 5)")
-    p.add_argument("--interactions", action="store_true", help="full response surface of equation (2)")
+    add_model_options(p, pj.PolynomialSpec("lafortune", 5))
     p.add_argument("--saturation", type=float, default=None, help="exclude pixels with a channel at or above this")
     p.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees")
     p.add_argument("--spp", type=int, default=64, help="environment samples per pixel of the design")
@@ -130,17 +128,17 @@ def run_fit_images(args) -> int:
         return 0
     if args.scene is None:
         raise InputError("scene: expected a JSON scene file (or --example DIR to write one to start from)")
+    spec = spec_from_args(args)
     if args.save:
         check_model_file(args.save, "--save")  # before any work
     scenes, images, target = load_scene_json(args.scene)
-    model = pj.fit_polynomial_to_images(
-        scenes, images, variables=args.variables, degree=args.degree, target=target, saturation=args.saturation,
-        cutoff_deg=args.cutoff, spp=args.spp, interactions=args.interactions,
-    )
+    model = pj.fit_polynomial_to_images(scenes, images, spec=spec, target=target, saturation=args.saturation,
+                                        cutoff_deg=args.cutoff, spp=args.spp)
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     out = {
-        "images": len(images), "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
-        "degree": args.degree, "rms_residual_rgb": np.asarray(model.l2).tolist(), "status_rgb": status,
+        "images": len(images), "pixels_used": int(np.asarray(model.n_used)[0]), "variables": spec.variables,
+        "degree": spec.degree, "spec": spec.to_dict(), "rms_residual_rgb": np.asarray(model.l2).tolist(),
+        "status_rgb": status,
         "condition": float(np.asarray(model.condition)[0]), "coefficients_rgb": np.asarray(model.coefficients).tolist(),
     }
     if args.save:
@@ -149,7 +147,7 @@ def run_fit_images(args) -> int:
     if args.json:
         print(strict_json(out))
     else:
-        print(f"fit-images: {out['images']} images, {out['pixels_used']} pixels used, {args.variables} p={args.degree}")
+        print(f"fit-images: {out['images']} images, {out['pixels_used']} pixels used, {spec.variables} p={spec.degree}")
         print("  RMS radiance residual (R, G, B): " + ", ".join(f"{x:.4g}" for x in out["rms_residual_rgb"]))
         print(f"  status: {', '.join(status)}; condition number {out['condition']:.3g}")
         if args.save:

@@ -9,7 +9,6 @@ and PNG (16-bit linear prediction, like the inputs; 8-bit error map), and prints
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -18,12 +17,15 @@ import png
 
 import polyjax as pj
 
+from .._config import check_model_file, check_output_dir
 from .._errors import InputError
 from ..render._image import write_exr, write_png
+from ._args import add_model_options, spec_from_args
 
-#: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``)
-DEFAULTS = dict(variables="rusinkiewicz", degree=8, interactions=True, link="identity", weighting="brdf",
-                robust_steps=0, cutoff=90.0)
+#: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model, then the
+#: fit's other options
+DEFAULT_SPEC = pj.PolynomialSpec("rusinkiewicz", 8, interactions=True)
+DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=0, cutoff=90.0)
 
 
 def parse_lights(text: str | None):
@@ -54,11 +56,7 @@ def add_photo_parsers(subparsers, parents=()) -> None:
         "light_directions.txt, light_intensities.txt, 16-bit PNGs, mask.png, Normal_gt.mat or normal.txt).")
     f.add_argument("folder", help="the capture's folder (e.g. pmsData/ballPNG)")
     f.add_argument("--lights", default=None, help="0-based lines of filenames.txt to fit, e.g. 0,2,4 or 0:48:2")
-    f.add_argument("--variables", default=DEFAULTS["variables"], help="explanatory variables (default rusinkiewicz)")
-    f.add_argument("--degree", type=int, default=DEFAULTS["degree"], help="polynomial degree (default 8)")
-    f.add_argument("--no-interactions", dest="interactions", action="store_false",
-                   help="equation (3) instead of the full response surface of equation (2)")
-    f.add_argument("--link", default=DEFAULTS["link"], choices=["identity", "log"], help="model link")
+    add_model_options(f, DEFAULT_SPEC)
     f.add_argument("--weighting", default=DEFAULTS["weighting"], choices=["brdf", "radiance"],
                    help="residual space (default brdf: the pixels' BRDF samples)")
     f.add_argument("--robust-steps", type=int, default=DEFAULTS["robust_steps"],
@@ -66,7 +64,7 @@ def add_photo_parsers(subparsers, parents=()) -> None:
     f.add_argument("--cutoff", type=float, default=DEFAULTS["cutoff"], help="grazing cutoff in degrees (default 90)")
     f.add_argument("--save", required=True, help="the model file to write (.npz or .json)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
-    f.set_defaults(func=run_fit_photos, interactions=DEFAULTS["interactions"])
+    f.set_defaults(func=run_fit_photos)
     r = subparsers.add_parser(
         "relight", parents=list(parents), help="predict a capture's photographs with a fitted model",
         description="Render a fitted model under the lights of a capture in DiLiGenT's layout; write the predicted "
@@ -79,46 +77,28 @@ def add_photo_parsers(subparsers, parents=()) -> None:
     r.set_defaults(func=run_relight)
 
 
-def _check_writable_file(path: str) -> Path:
-    p = Path(path)
-    if p.suffix not in (".npz", ".json"):
-        raise InputError(f"--save: expected a .npz or .json file name, found {path!r}")
-    if p.is_dir() or not p.parent.resolve().is_dir() or not os.access(p.parent.resolve(), os.W_OK):
-        raise InputError(f"--save: {path}: expected a file in an existing, writable folder")
-    return p
-
-
-def _check_out_dir(path: str) -> Path:
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise InputError(f"--out: {path} exists and is not a folder")
-    parent = p if p.exists() else p.parent
-    if not parent.resolve().is_dir() or not os.access(parent.resolve(), os.W_OK):
-        raise InputError(f"--out: {path}: expected a writable folder (or one that can be created)")
-    return p
-
-
 def run_fit_photos(args) -> int:
     """Run ``polyjax fit-photos``; returns the exit status."""
-    save = _check_writable_file(args.save)
+    spec = spec_from_args(args)
+    save = check_model_file(args.save, "--save")
     capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
     t0 = time.perf_counter()
     model = pj.fit_polynomial_to_images(
-        capture.scenes, capture.images, args.variables, args.degree, saturation=capture.saturation,
-        cutoff_deg=None if args.cutoff >= 90 else args.cutoff, interactions=args.interactions, link=args.link,
-        weighting=args.weighting, robust_steps=args.robust_steps)
+        capture.scenes, capture.images, spec=spec, saturation=capture.saturation,
+        cutoff_deg=None if args.cutoff >= 90 else args.cutoff, weighting=args.weighting,
+        robust_steps=args.robust_steps)
     seconds = time.perf_counter() - t0
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     pj.save_model(save, model, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
-    out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
-           "degree": args.degree, "interactions": bool(args.interactions), "link": args.link,
+    out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": spec.variables,
+           "degree": spec.degree, "interactions": spec.interactions, "link": spec.link, "spec": spec.to_dict(),
            "weighting": args.weighting, "robust_steps": args.robust_steps, "status_rgb": status,
            "fit_seconds": seconds, "saved": str(save)}
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {args.variables} "
-              f"p={args.degree}{' with interactions' if args.interactions else ''}, link {args.link}, "
+        print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {spec.variables} "
+              f"p={spec.degree}{' with interactions' if spec.interactions else ''}, link {spec.link}, "
               f"{args.weighting} weighting, {args.robust_steps} robust steps ({seconds:.2f} s)")
         print(f"  status: {', '.join(status)}; model written to {save}")
     return 0 if all(s == "OK" for s in status) else 1
@@ -150,7 +130,7 @@ def write_png16(path: Path, image) -> None:
 
 def run_relight(args) -> int:
     """Run ``polyjax relight``; returns the exit status."""
-    out_dir = _check_out_dir(args.out)
+    out_dir = check_output_dir(args.out, "--out")
     model = pj.load_model(args.model)
     capture = pj.data.load_photometric(args.folder, parse_lights(args.lights))
     predicted = np.asarray(pj.relight(model, capture))

@@ -4,6 +4,7 @@ measured reference, written as EXR (linear) and PNG (sRGB preview)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import jax
@@ -31,7 +32,7 @@ from ..render import (
     write_png,
 )
 from ..render._brdf import TabulatedBRDF
-from ._args import add_image_options, check_degrees_fit, parse_degrees
+from ._args import add_image_options, add_model_options, check_degrees_fit, spec_from_args
 
 
 def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
@@ -46,9 +47,7 @@ def add_render_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     r.add_argument("--dataset", default=None,
                    help="dataset spec, e.g. curet:25,33 or merl-nbrdf:green-latex (default: curet:25 with a data "
                         "root, else the built-in synthetic set)")
-    r.add_argument("--variables", default="lafortune", help="explanatory variables of the polynomial model")
-    r.add_argument("--degrees", "--degree", dest="degrees", default="5",
-                   help="polynomial degree, or comma-separated degrees: one grid row each (default 5)")
+    add_model_options(r, pj.PolynomialSpec("lafortune", 5), several=True)  # several degrees: one grid row each
     r.add_argument("--model", default=None,
                    help="a saved model file (.npz/.json of polyjax.save_model: polynomial or baseline fit; it must "
                    "hold as many materials as --dataset), or a baseline model name as in `fit --model` (e.g. "
@@ -98,16 +97,17 @@ def run_render(args) -> int:
     root = getattr(args, "data_root", None)
     out = Path(args.out)
     check_output_file(out.with_suffix(".exr"), "--out")
-    degrees = parse_degrees(args.degrees, "--degrees")
+    model_spec = spec_from_args(args, several=True, flag="--degrees")
+    degrees = list(model_spec.degree) if isinstance(model_spec.degree, tuple) else [model_spec.degree]
     spec = args.dataset or ("curet:25" if configured_data_root(root) is not None else "synthetic")
     m = pj.data.synthetic_default() if spec == "synthetic" else pj.data.load(spec, root)
     if not args.model or args.model.strip().lower() == "polynomial":
-        check_degrees_fit(m, args.variables, degrees, False, 80.0, "--degrees")
+        check_degrees_fit(m, model_spec.variables, degrees, model_spec.interactions, 80.0, "--degrees")
     has_channels = bool(m.axes) and m.axes[-1] == "channel"
     vals = np.asarray(m.values)
     n_mat = int(np.prod(vals.shape[: vals.ndim - (2 if has_channels else 1)], dtype=int))
     names = list(m.names) if m.names else [spec]
-    rows, row_names = _rows(args, m, spec, root, degrees, n_mat, has_channels)
+    rows, row_names = _rows(args, m, spec, root, model_spec, degrees, n_mat, has_channels)
     if args.swap_uv:
         rows = [[SwapUV(b) for b in row] for row in rows]
     cam = Camera(eye=(0.0, 0.0, 5.0), width=args.size, height=args.size, ortho_height=2.1)
@@ -124,7 +124,7 @@ def run_render(args) -> int:
     return 0
 
 
-def _rows(args, m, spec: str, root, degrees, n_mat: int, has_channels: bool):
+def _rows(args, m, spec: str, root, model_spec, degrees, n_mat: int, has_channels: bool):
     """The grid's rows (one RGB BRDF per material each) and their names: the measured reference with
     ``--reference``, then the ``--model`` (a saved file or a baseline fitted to ``m``) or one polynomial fit per
     degree."""
@@ -146,7 +146,7 @@ def _rows(args, m, spec: str, root, degrees, n_mat: int, has_channels: bool):
         row_names.append(row_name)
     else:
         for p in degrees:
-            model = pj.fit_polynomial(m, variables=args.variables, degree=p)
+            model = pj.fit_polynomial(m, spec=dataclasses.replace(model_spec, degree=p))
             rows.append(_lanes(model, n_mat, has_channels, args.model, spec))
             row_names.append(f"p={p}")
     return rows, row_names

@@ -16,6 +16,7 @@ No initial guess, no iteration: the same basis, PCA and solver as :func:`polyjax
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import Sequence
 
 import jax
@@ -27,7 +28,7 @@ from .._arrays import is_concrete
 from .._basis import BASES
 from .._design import fitted_design as _design_for
 from .._errors import InputError
-from .._model import RESULTS, PolynomialBRDF
+from .._model import RESULTS, SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
 from .._solve.lstsq import METHODS, weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
@@ -57,6 +58,7 @@ def fit_polynomial_to_images(
     steps: int = 3,
     weighting: str = "radiance",
     robust_steps: int = 0,
+    spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
     because of this docstring; the code is three steps: option checks, :func:`image_rows`, ``_solve_images`` (or
@@ -110,6 +112,8 @@ def fit_polynomial_to_images(
             :mod:`polyjax.inverse._samples`).
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
             their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
+        spec: the model's definition as one value (:class:`polyjax.PolynomialSpec`, one degree), instead of
+            ``variables``, ``degree``, ``basis``, ``interactions``, ``link`` and ``eps``.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any
@@ -122,6 +126,9 @@ def fit_polynomial_to_images(
         InputError: scenes/images disagree in number or size, an image is not ``(H, W, 3)``, bad options,
             or a scene with inter-reflections.
     """
+    spec = spec_of("fit_polynomial_to_images", spec, _SPEC_DEFAULTS, variables=variables, degree=degree,
+                   basis=basis, interactions=interactions, link=link, eps=eps)
+    variables, degree, basis, interactions, link, eps = (getattr(spec, k) for k in SPEC_FIELDS)
     vs = _check_image_fit_options(variables, degree, basis, method)
     if int(robust_steps) != robust_steps or int(robust_steps) < 0:
         raise InputError(f"robust_steps: expected a non-negative integer, found {robust_steps!r}")
@@ -145,6 +152,10 @@ def fit_polynomial_to_images(
         shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
     return _solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
                   interactions=bool(interactions), method=method, rcond=rcond, shared=shared)
+
+
+#: the keyword defaults of :func:`fit_polynomial_to_images` that :class:`polyjax.PolynomialSpec` groups
+_SPEC_DEFAULTS = {k: inspect.signature(fit_polynomial_to_images).parameters[k].default for k in SPEC_FIELDS}
 
 
 def _check_image_fit_options(variables, degree, basis, method):

@@ -15,8 +15,8 @@ import jax.numpy as jnp
 
 from polyjax import RESULTS
 
-from ._models.registry import get_model
-from ._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, optimistix_solve, prepare_lanes, residual_fn
+from .._models.registry import get_model
+from .._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, optimistix_solve, prepare_lanes, residual_fn
 
 with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained: it is the alternative backend named
     warnings.filterwarnings("ignore", message="JAXopt is no longer maintained", category=DeprecationWarning)
