@@ -21,7 +21,7 @@ Typical use::
 from ._brdf import BRDF, ChannelsFirst, Lambertian, ParametricBRDF, Phong, SwapUV, TabulatedBRDF, evaluate_rgb, rgb_brdf
 from ._envmap import EnvironmentLight, load_envmap, pool_indices, procedural_sky, sample_pool
 from ._grid import GridResult, render_grid, sphere_scene
-from ._image import comparison_figure, difference_images, mosaic, read_exr, to_srgb, write_exr, write_png
+from ._image import difference_images, mosaic, read_exr, to_srgb, write_exr, write_png
 from ._integrator import RenderResult, cast_floats, render
 from ._linear import LightSamples, light_samples, render_linear
 from ._mitsuba import RoughPlastic, mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba
@@ -37,3 +37,12 @@ __all__ = [
     "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
     "ImportanceSampler", "importance_sampler", "NormalMap",
 ]
+
+
+def __getattr__(name):
+    if name == "comparison_figure":  # the lazy package face: matplotlib only when a figure is drawn
+        from ._figure import comparison_figure
+
+        globals()[name] = comparison_figure
+        return comparison_figure
+    raise AttributeError(f"module 'polyjax.render' has no attribute {name!r}")

@@ -1,4 +1,5 @@
-"""Images: OpenEXR input/output (linear RGB float), sRGB previews, difference images, figures."""
+"""Images: OpenEXR input/output (linear RGB float), sRGB previews (8-bit PNG through pypng), difference images,
+mosaics; the figure of the paper's Fig. 4 is :mod:`polyjax.render._figure`."""
 
 from __future__ import annotations
 
@@ -6,14 +7,12 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib.image
 import numpy as np
 import OpenEXR
+import png
 from jaxtyping import ArrayLike
-from matplotlib.figure import Figure
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
-from .._metrics import psnr
 
 
 def _as_rgb(image, name="image") -> np.ndarray:
@@ -86,7 +85,10 @@ def write_png(path: str | os.PathLike, image: ArrayLike, exposure: float = 0.0, 
     """Write a preview PNG: tone-mapped sRGB (``srgb=True``) or an image already in ``[0, 1]`` display values."""
     disp = to_srgb(image, exposure, tonemap) if srgb else np.clip(_as_rgb(image), 0.0, 1.0)
     path = Path(path)
-    matplotlib.image.imsave(str(path), (np.round(disp * 255)).astype(np.uint8))
+    rows = np.round(disp * 255).astype(np.uint8)
+    h, w, _ = rows.shape
+    with open(path, "wb") as fh:
+        png.Writer(w, h, greyscale=False, bitdepth=8).write(fh, rows.reshape(h, w * 3))
     return path
 
 
@@ -130,39 +132,4 @@ def mosaic(images: Sequence[Sequence[ArrayLike]] | np.ndarray, pad: int = 2, fil
     return out
 
 
-def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Sequence[ArrayLike],
-                      names: Sequence[str], reference_name: str = "measured", exposure: float = 0.0,
-                      tonemap: str = "clip", mask: ArrayLike | None = None) -> dict[str, float]:
-    """Save a figure like the paper's Fig. 4: the reference beside each model's rendering, each with
-    its difference image (common scale) and its PSNR in dB against the reference (Table 3).
-
-    PSNR is computed on the tone-mapped sRGB images (peak 1), optionally only inside ``mask``.
-
-    Returns:
-        ``{name: psnr_dB}``.
-    """
-    if len(names) != len(images):
-        raise InputError(f"names: expected {len(images)} names (one per image), found {len(names)}")
-    ref_d = to_srgb(reference, exposure, tonemap)
-    disp = [to_srgb(im, exposure, tonemap) for im in images]
-    diffs, scale = difference_images(disp, ref_d)
-    m = None if mask is None else np.asarray(mask)[..., None]
-    scores = {n: float(psnr(d, ref_d, peak=1.0, mask=m)) for n, d in zip(names, disp)}
-    k = len(images) + 1
-    fig = Figure(figsize=(2.2 * k, 4.6))  # no pyplot: no global backend or figure manager
-    ax = fig.subplots(2, k, squeeze=False)
-    ax[0, 0].imshow(ref_d)
-    ax[0, 0].set_title(reference_name, fontsize=9)
-    ax[1, 0].text(0.5, 0.5, f"|difference|\nscale 0..{scale:.3g}", ha="center", va="center", fontsize=8)
-    for j, (n, d, df) in enumerate(zip(names, disp, diffs), start=1):
-        ax[0, j].imshow(d)
-        ax[0, j].set_title(f"{n}\n{scores[n]:.2f} dB", fontsize=9)
-        ax[1, j].imshow(df, cmap="inferno", vmin=0.0, vmax=1.0)
-    for a in ax.ravel():
-        a.set_axis_off()
-    fig.tight_layout()
-    fig.savefig(str(path), dpi=100)
-    return scores
-
-
-__all__ = ["comparison_figure", "difference_images", "mosaic", "read_exr", "to_srgb", "write_exr", "write_png"]
+__all__ = ["difference_images", "mosaic", "read_exr", "to_srgb", "write_exr", "write_png"]
