@@ -36,7 +36,13 @@ import numpy as np
 import polyjax as pj
 from polyjax.internal import SAVED_PROGRAMS_ENV as ENV
 from polyjax.internal import SAVED_PROGRAMS_FOLDER as FOLDER
-from polyjax.internal import cache_disabled_by_env, load_lapack_kernels, program_key, source_stamp
+from polyjax.internal import (
+    cache_disabled_by_env,
+    compile_for_saving,
+    load_lapack_kernels,
+    program_key,
+    source_stamp,
+)
 
 from ._result import BaselineFit
 
@@ -169,11 +175,7 @@ def _compile(fit, name: str, options: dict, arrays, path: Path):
         return out
 
     try:
-        lowered = jax.jit(fields).lower(*arrays)
-        try:
-            compiled = lowered.compile(COMPILER_OPTIONS)
-        except Exception:  # noqa: BLE001 - an XLA that no longer knows an option: its defaults
-            compiled = lowered.compile()
+        compiled = compile_for_saving(fields, arrays, f"saved_{path.stem.replace('-', '_')}", COMPILER_OPTIONS)
     except pj.InputError:  # the ordinary call raises it with the eager message
         return None
     except Exception as e:  # noqa: BLE001 - fitted without a saved program

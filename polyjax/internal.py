@@ -15,12 +15,12 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   ``polyjax fit --model`` find other packages' models through them);
 - data: :func:`data_file`, :func:`configured_data_root` (files below the data root);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
-  :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env` (a fitter keeping its
-  compiled executable beside the compilation cache, as ``polyjax fit`` does).
+  :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving` (a
+  fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does).
 """
 
 from ._arrays import device_array, is_concrete, is_traced
-from ._cache.compilation import cache_disabled_by_env
+from ._cache.compilation import cache_disabled_by_env, compile_for_saving
 from ._cache.keys import program_key, source_stamp
 from ._config import configured_data_root, data_file
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
@@ -34,7 +34,8 @@ from ._results import raise_on_status
 from ._solve.threads import one_lapack_thread
 
 __all__ = [
-    "SAVED_PROGRAMS_ENV", "SAVED_PROGRAMS_FOLDER", "cache_disabled_by_env", "load_lapack_kernels", "program_key",
+    "SAVED_PROGRAMS_ENV", "SAVED_PROGRAMS_FOLDER", "cache_disabled_by_env", "compile_for_saving", "load_lapack_kernels",
+    "program_key",
     "source_stamp",
     "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",

@@ -26,9 +26,9 @@ def _cli(args, env):
 
 
 def test_cli_cache_is_hit_by_a_second_process(tmp_path):
-    """Two fresh processes: the first compiles (says so on stderr) and writes the cache and the fit's executable;
-    the second loads that executable (no file added anywhere) and prints the same fit as a process without any
-    cache."""
+    """Two fresh processes: the first compiles (says so on stderr) and writes the fit's executable (the whole fit:
+    one program, kept only as that file, not in JAX's cache: tests/test_saved_programs_rewritten.py); the second
+    loads that executable (no file added anywhere) and prints the same fit as a process without any cache."""
     env = {k: v for k, v in os.environ.items() if k not in ("POLYJAX_DATA", "POLYJAX_CACHE", "CI")}
     env.update(PYTHONPATH=str(ROOT), POLYJAX_COMPILE_NOTICE_SECS="0")
     folder = tmp_path / "jax-cache"
@@ -36,7 +36,7 @@ def test_cli_cache_is_hit_by_a_second_process(tmp_path):
     first = _cli(args, env)
     assert first.returncode == 0, first.stderr
     written = sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
-    assert any(name.startswith("jit_run") for name in written), written  # the whole fit: one program
+    assert not any(name.startswith("jit_saved") for name in written), written
     assert len(list((folder / "polyjax-programs").glob("fit-*.bin"))) == 1, written
     assert "polyjax: compiling the fit" in first.stderr
     second = _cli(args, env)

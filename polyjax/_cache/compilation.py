@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from pathlib import Path
 
 import jax
@@ -127,3 +128,45 @@ def listen_for_misses() -> None:
 def cache_misses() -> int:
     """How many programs JAX's persistent cache did not hold since :func:`listen_for_misses` (each one compiled)."""
     return _counts["misses"]
+
+
+_SAVING = threading.Lock()
+
+
+def compile_for_saving(fn, arrays, name: str, compiler_options: dict | None = None):
+    """``jax.jit(fn)`` lowered for ``arrays`` and compiled afresh, never through JAX's persistent compilation cache:
+    the executable of a saved program, to be serialised (:mod:`polyjax._fit.saved`, ``baselines``' own).
+
+    In this JAX an executable that the persistent cache loaded does not serialise whole: written and loaded again
+    in a later process it fails when run (``NOT_FOUND: Function ..._kernel not found``), as it did in every
+    ``polyjax fit`` and ``baselines.fit`` once the saved file was gone (a cleared folder, a new source stamp) while
+    JAX's cache kept the program. So the program is named ``name`` (unique to the saved program's key, which JAX's
+    cache key then includes: no entry of another polyjax version matches it) and is not written into JAX's cache
+    (the minimum compile time for writing is raised while it compiles; the saved file is its persistent form).
+
+    Args:
+        fn: the program; ``arrays``: its arguments (concrete, or ``jax.ShapeDtypeStruct``).
+        name: the program's name, letters, digits and ``_``.
+        compiler_options: XLA's options; an XLA that refuses them compiles with its defaults.
+
+    Returns:
+        The compiled executable (:class:`jax.stages.Compiled`). Lowering raises what tracing ``fn`` raises.
+    """
+
+    def program(*args):
+        return fn(*args)
+
+    program.__name__ = program.__qualname__ = name
+    lowered = jax.jit(program).lower(*arrays)
+    with _SAVING:
+        before = jax.config.jax_persistent_cache_min_compile_time_secs
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+        try:
+            if compiler_options:
+                try:
+                    return lowered.compile(compiler_options)
+                except Exception:  # noqa: BLE001 - an XLA that no longer knows an option: its defaults
+                    pass
+            return lowered.compile()
+        finally:
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", before)

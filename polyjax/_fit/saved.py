@@ -25,10 +25,10 @@ import os
 import pickle
 from pathlib import Path
 
-import jax
 import numpy as np
 from jax.experimental import serialize_executable
 
+from .._cache.compilation import compile_for_saving
 from .._cache.keys import program_key
 from .._errors import PolyjaxError
 from .._metrics import l2_error
@@ -61,7 +61,7 @@ def _program(options: dict):
         zero = l2_error(values, 0.0, u, v, weights=weights, cutoff_deg=options["cutoff_deg"], mask=mask)
         return {name: getattr(model, name) for name in _FIELDS}, zero
 
-    return jax.jit(run)
+    return run
 
 
 def _load_lapack() -> None:
@@ -106,7 +106,7 @@ def _load(path: Path):
 
 def _compile_and_keep(opts: dict, arrays, path: Path):
     call_opts = dict(opts, degree=list(opts["degree"]) if isinstance(opts["degree"], tuple) else opts["degree"])
-    compiled = _program(call_opts).lower(*arrays).compile()
+    compiled = compile_for_saving(_program(call_opts), arrays, f"saved_{path.stem.replace('-', '_')}")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_bytes(pickle.dumps(serialize_executable.serialize(compiled)))

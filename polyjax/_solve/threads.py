@@ -28,9 +28,13 @@ threads, and ``with pj.lapack_threads(n):`` sets a count for a block and puts th
 from __future__ import annotations
 
 import functools
+import importlib
+import importlib.machinery
+import importlib.util
 import os
 import sys
 import threading
+from pathlib import Path
 
 from threadpoolctl import ThreadpoolController
 
@@ -69,12 +73,39 @@ def _load_lapack(n: int) -> None:
     saved = os.environ.get("OPENBLAS_NUM_THREADS")
     os.environ["OPENBLAS_NUM_THREADS"] = str(n)
     try:
-        from scipy.linalg import cython_lapack  # noqa: F401 - loading it is the point
+        _import_lapack_modules()
     finally:
         if saved is None:
             os.environ.pop("OPENBLAS_NUM_THREADS", None)
         else:
             os.environ["OPENBLAS_NUM_THREADS"] = saved
+
+
+def _import_lapack_modules() -> None:
+    """Import scipy's ``cython_blas`` and ``cython_lapack``, whose function tables jaxlib's LAPACK kernels use (and
+    whose loading loads scipy's OpenBLAS), without the package ``scipy.linalg`` around them: its ``__init__``
+    imports the whole of ``scipy.linalg``, about 0.15 s, a third of a warm first fit's time in a fresh process
+    (``benchmarks/bench_latency.py``), where the two extension modules take 15 ms. Each is loaded from its file
+    under its own name, so jaxlib, and a later ``import scipy.linalg``, find it in ``sys.modules``; with any other
+    layout of scipy, the plain import."""
+    try:
+        folder = Path(importlib.util.find_spec("scipy").origin).parent / "linalg"
+        for name in ("cython_blas", "cython_lapack"):
+            full = f"scipy.linalg.{name}"
+            if full in sys.modules:
+                continue
+            path = next(folder / (name + s) for s in importlib.machinery.EXTENSION_SUFFIXES
+                        if (folder / (name + s)).is_file())
+            spec = importlib.util.spec_from_file_location(full, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[full] = module
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[full]
+                raise
+    except (StopIteration, ImportError, AttributeError, TypeError, OSError):
+        importlib.import_module(_LAPACK_MODULE)  # the plain import, as jaxlib itself would do it
 
 
 def _libraries(n: int):
