@@ -123,8 +123,8 @@ def spec_of(fn: str, spec, defaults: dict, **given) -> PolynomialSpec:
 
 def _same(a, b) -> bool:
     """Equal as definitions: ``7``, ``[7]`` and ``(7,)`` differ (one degree, or a degree axis)."""
-    if isinstance(a, (str, bool, float, int)) or isinstance(b, (str, bool, float, int)):
-        return type(a) is type(b) and a == b if isinstance(a, str) or isinstance(b, str) else a == b
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
     return np.shape(a) == np.shape(b) and bool(np.all(np.asarray(a) == np.asarray(b)))
 
 
