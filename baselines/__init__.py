@@ -24,10 +24,12 @@ from ._models.cook_torrance import cook_torrance
 from ._models.gltf_pbr import gltf_brdf, gltf_pbr
 from ._models.lafortune import lafortune
 from ._models.lafortune_anisotropic import lafortune_anisotropic
+from ._models.openpbr import open_pbr_surface
 from ._models.oren_nayar import oren_nayar
 from ._models.principled import principled, principled_brdf
 from ._models.registry import MODELS, NONLINEAR_MODELS, PAPER_MODELS, STANDARD_MODELS, get_model
 from ._models.sgd import sgd
+from ._models.usd_preview import usd_preview_surface
 from ._models.ward import ward
 from ._models.ward_anisotropic import ward_anisotropic
 from ._models.ward_duer import ward_duer
@@ -56,3 +58,4 @@ __all__ = [
 ]
 __all__ += ["SavedProgramWarning"]
 __all__ += ["STANDARD_MODELS", "gltf_brdf", "gltf_pbr", "principled", "principled_brdf", "standard_material"]
+__all__ += ["open_pbr_surface", "usd_preview_surface"]

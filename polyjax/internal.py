@@ -8,20 +8,29 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   :class:`PreparedInputs`; :func:`check_parameter_count` (no interpolating fits); :func:`fit_weights` (the weights
   of equation (11));
 - tracing: :func:`is_traced`, :func:`is_concrete` (a check made eagerly only, a memo kept only for concrete arrays);
+- arrays: :func:`device_array` (host data to the device, no compiled program), :func:`cast_concrete` (a concrete
+  array cast on the host, no compiled program): a fitter's or a model's eager steps without programs of their own;
+- solves: :data:`TALL_ROWS` (the rows from which :func:`polyjax.weighted_lstsq` factorises by CholeskyQR2: a
+  fitter, or a check of one, that sizes a problem for that path);
 - results: :func:`raise_on_status` (``throw=`` of every fitter), :func:`result_message`;
 - LAPACK: :func:`one_lapack_thread` (decorate a public fitter: jaxlib's LAPACK library limited before it runs);
 - saved models: :class:`ModelKind`, :func:`module_kind`, :func:`register_model_kind`, :func:`model_kinds`,
   :func:`kind_named`, :func:`kind_of`, :func:`fitter_for` (``polyjax.save_model``/``load_model`` and
   ``polyjax fit --model`` find other packages' models through them);
-- data: :func:`data_file`, :func:`configured_data_root` (files below the data root);
+- data: :func:`data_file`, :func:`configured_data_root` (files below the data root); :func:`grid_memo` (a loader's
+  per-process memo of arrays made from a grid's arguments, computed once, possibly in a background thread, as the
+  MERL loader's grid), :func:`forget_memos` (every in-process memo forgotten: the state of a fresh process, for
+  measuring or checking what a first call does);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving` (a
   fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does).
 """
 
-from ._arrays import device_array, is_concrete, is_traced
+from ._arrays import cast_concrete, device_array, is_concrete, is_traced
 from ._cache.compilation import cache_disabled_by_env, compile_for_saving
 from ._cache.keys import program_key, source_stamp
+from ._cache.memo import forget_all as forget_memos
+from ._cache.memo import grid_memo
 from ._config import configured_data_root, data_file
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
 from ._fit.saved import FOLDER as SAVED_PROGRAMS_FOLDER
@@ -31,6 +40,7 @@ from ._io import ModelKind, fitter_for, kind_named, kind_of, model_kinds, module
 from ._metrics import fit_weights
 from ._results import message as result_message
 from ._results import raise_on_status
+from ._solve.lstsq import TALL_ROWS
 from ._solve.threads import one_lapack_thread
 
 __all__ = [
@@ -40,4 +50,5 @@ __all__ = [
     "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
     "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
+    "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
 ]

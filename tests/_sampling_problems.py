@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import polyjax as pj
+import polyjax.render as pr
 
 NORMAL = np.array([0.0, 0.0, 1.0])
 GRAZING = np.array([np.sin(np.deg2rad(80.0)), 0.0, np.cos(np.deg2rad(80.0))])
@@ -68,20 +69,16 @@ def expected_frequencies(pdf):
     """Integral of ``pdf(w)`` over each bin, bins ``BINS x BINS`` cells of the square of the equal-area
     hemisphere map (``d omega = 2 pi dA``), by the midpoint rule on a grid aligned with the table cells
     (exact for the tabulated part, which is bilinear on each sub-cell: the midpoint rule integrates it exactly)."""
-    from polyjax.render._sampling import square_to_hemisphere
-
     m = BINS * SUB
     g = (np.arange(m) + 0.5) / m
     X, Y = np.meshgrid(g, g)
-    vals = np.asarray(pdf(square_to_hemisphere(jnp.asarray(np.stack([X, Y], -1)))))
+    vals = np.asarray(pdf(pr.square_to_hemisphere(jnp.asarray(np.stack([X, Y], -1)))))
     return (vals * 2 * np.pi / m**2).reshape(BINS, SUB, BINS, SUB).sum(axis=(1, 3))
 
 
 def observed_frequencies(u):
-    from polyjax.render._sampling import hemisphere_to_square
-
     u = np.asarray(u)
-    s = np.asarray(hemisphere_to_square(jnp.asarray(u[u[:, 2] > 0])))
+    s = np.asarray(pr.hemisphere_to_square(jnp.asarray(u[u[:, 2] > 0])))
     h, _, _ = np.histogram2d(s[:, 1], s[:, 0], bins=[np.linspace(0, 1, BINS + 1)] * 2)
     return h
 

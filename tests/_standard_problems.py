@@ -90,7 +90,8 @@ def _fresnel_dielectric(c, ior):
     return np.where(g2 < 0, 1.0, f)
 
 
-def _hoffman(c, f0, f82, f90, e):
+def hoffman_fresnel(c, f0, f82, f90, e):
+    """mx_fresnel_hoffman_schlick: Hoffman's generalised Schlick with the F82 tint."""
     cmax = 1 / 7
     factor = 1 / (cmax * (1 - cmax) ** 6)
     x = np.clip(c, 0, 1)
@@ -133,7 +134,7 @@ def schlick_bsdf(L, V, weight, c0, c82, alpha):
     """mx_generalized_schlick_bsdf (color90 = 1, exponent 5): response (its throughput is not used by OpenPBR)."""
     if weight < EPS:
         return 0.0
-    return _microfacet_closure(L, V, alpha, lambda c: _hoffman(c, max(c0, 0), max(c82, 0), 1.0, 5.0), c0, 1.0,
+    return _microfacet_closure(L, V, alpha, lambda c: hoffman_fresnel(c, max(c0, 0), max(c82, 0), 1.0, 5.0), c0, 1.0,
                                weight)[0]
 
 

@@ -3,7 +3,9 @@
 ``Over 80 lines because``; ``polyjax`` never imports ``baselines``; no import circle in either package (imports
 inside functions counted); imports of the project's own modules inside functions only in the command dispatcher
 and the lazy package faces; at most 16 modules at the root of ``polyjax``; ``baselines`` imports nothing private of
-``polyjax``. Each check has a self-test that shows it can fail."""
+``polyjax``; the tests reach polyjax and baselines through their public faces, ``polyjax.internal`` and their
+switches (no private module imported, no private attribute monkeypatched). Each check has a self-test that shows it
+can fail."""
 
 from __future__ import annotations
 
@@ -316,3 +318,130 @@ def test_root_module_count_leaves_out_the_package_files(names, over):
 ])
 def test_private_import_check(source, flagged):
     assert (private_polyjax_imports("baselines/_x.py", source) != []) is flagged
+
+
+# ---------------------------------------------------------------- tests reach the library through its public faces
+
+#: the one module with a leading-underscore-free name that is nevertheless not the user's API: allowed in tests
+TEST_ALLOWED_PRIVATE = ("polyjax.internal",)
+#: the receivers of ``setattr``/``delattr`` calls read as pytest's monkeypatch fixture
+MONKEYPATCH_NAMES = ("monkeypatch", "mp")
+
+
+def _test_sources():
+    """``(path, text)`` of the test modules (``tests/test_*.py``) and their shared helpers (``tests/_*.py``), but this
+    file (whose checks hold private imports as examples, in strings)."""
+    for path in sorted((ROOT / "tests").glob("*.py")):
+        if path.name.startswith(("test_", "_")) and path.name != "__init__.py" and path.name != Path(__file__).name:
+            yield f"tests/{path.name}", path.read_text(encoding="utf-8")
+
+
+def _is_private(dotted: str) -> bool:
+    """Whether ``dotted`` (``polyjax._io``, ``baselines._models.openpbr``, ``polyjax.data._merl``) names something
+    private of polyjax or baselines: a component after the package that starts with ``_`` (dunders such as
+    ``__version__`` are public), and not :data:`TEST_ALLOWED_PRIVATE`."""
+    parts = dotted.split(".")
+    if parts[0] not in PACKAGES or dotted in TEST_ALLOWED_PRIVATE:
+        return False
+    return any(p.startswith("_") and not (p.startswith("__") and p.endswith("__")) for p in parts[1:])
+
+
+def _dotted(node) -> str | None:
+    """``a.b.c`` of a name or attribute chain, else None."""
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if not isinstance(node, ast.Name):
+        return None
+    return ".".join([node.id] + parts[::-1])
+
+
+def private_test_access(rel: str, source: str) -> list[str]:
+    """``path:line what`` of every way ``source`` (a test file) reaches past the public faces of polyjax and
+    baselines: an import of a private module or name (``import polyjax._fit.log``, ``from polyjax.data import
+    _merl``, ``from baselines._models.openpbr import open_pbr_surface``, ``importlib.import_module`` of one), the same
+    in Python code held in a string (a subprocess's script), and ``monkeypatch.setattr``/``delattr`` of a private
+    attribute (``"_x"``), of a private module or attribute (``pj._fit.stream``) or of a name imported from one.
+    :data:`TEST_ALLOWED_PRIVATE` is public for this purpose."""
+    found: list[str] = []
+    tree = ast.parse(source)
+    private_names: set[str] = set()  # local names bound to private modules or names
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if _is_private(a.name):
+                    found.append(f"{rel}:{node.lineno} import {a.name}")
+                    private_names.add(a.asname or a.name.split(".")[0])
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                if _is_private(node.module) or _is_private(full):
+                    found.append(f"{rel}:{node.lineno} from {node.module} import {a.name}")
+                    private_names.add(a.asname or a.name)
+        elif isinstance(node, ast.Call) and (_dotted(node.func) or "").endswith("import_module") and node.args \
+                and isinstance(node.args[0], ast.Constant) and _is_private(str(node.args[0].value)):
+            found.append(f"{rel}:{node.lineno} import_module({node.args[0].value!r})")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and ("polyjax" in node.value
+                                                                               or "baselines" in node.value):
+            try:  # Python code in a string, e.g. the script of a subprocess
+                inner = ast.parse(node.value)
+            except SyntaxError:
+                continue
+            if any(isinstance(n, (ast.Import, ast.ImportFrom)) for n in ast.walk(inner)):
+                found += [f"{rel}:{node.lineno} (in a string) {hit.split(' ', 1)[1]}"
+                          for hit in private_test_access(rel, node.value)]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in (
+                "setattr", "delattr") and (_dotted(node.func.value) or "").split(".")[-1] in MONKEYPATCH_NAMES \
+                and node.args:
+            target, name = node.args[0], node.args[1] if len(node.args) > 1 else None
+            where = _dotted(target) or ""
+            private = (
+                (isinstance(target, ast.Constant) and _is_private(str(target.value)))
+                or (isinstance(name, ast.Constant) and str(name.value).startswith("_")
+                    and not str(name.value).startswith("__"))
+                or _is_private("polyjax." + where.partition(".")[2]) or where.split(".")[0] in private_names
+            )  # a private name set; a private module or attribute patched (pj._fit.stream); a private import's
+            if private:
+                found.append(f"{rel}:{node.lineno} monkeypatch.{node.func.attr}({ast.unparse(target)}, "
+                             f"{ast.unparse(name) if name is not None else ''})")
+    return found
+
+
+def test_tests_reach_the_library_through_its_public_faces():
+    """Tests use the public API, ``polyjax.internal`` and the switches the library offers (environment variables,
+    config calls); never private modules, nor monkeypatches of private attributes (docs/testing.md)."""
+    found = [hit for rel, source in _test_sources() for hit in private_test_access(rel, source)]
+    assert found == [], "tests reach private parts of the library: " + "; ".join(found)
+    sources = dict(_test_sources())  # the scan sees the tests' imports of the library (it is not vacuous)
+    assert len(sources) > 40 and "tests/_problems.py" in sources
+    assert private_test_access("t.py", "from polyjax.internal import prepare_inputs\nimport polyjax._io\n") != []
+
+
+@pytest.mark.parametrize("source, flagged", [
+    ("import polyjax._fit.log\n", True),
+    ("import baselines._aot as aot\n", True),
+    ("from polyjax._cache.memo import GridMemo\n", True),
+    ("from polyjax.data import _merl\n", True),
+    ("from polyjax import _io as kinds\n", True),
+    ("def f():\n    from baselines._models import mx_microfacet as mx\n", True),
+    ("from polyjax.render._mitsuba import mitsuba_bsdf_eval\n", True),
+    ("import importlib\nm = importlib.import_module('polyjax.cli._main')\n", True),
+    ("CODE = 'import sys; from polyjax.cli._main import build_parser'\n", True),
+    ("CHILD = '''\nimport baselines._aot as aot\naot._compile = None\n'''\n", True),
+    ("def test(monkeypatch):\n    monkeypatch.setattr(pj, '_REGISTRY', {})\n", True),
+    ("def test(monkeypatch):\n    monkeypatch.setattr('polyjax._fit.stream.BLOCK', 512)\n", True),
+    ("def test(monkeypatch):\n    monkeypatch.setattr(pj._fit.stream, 'BLOCK', 512)\n", True),
+    ("import polyjax._fit.stream as s\ndef test(monkeypatch):\n    monkeypatch.setattr(s, 'BLOCK', 512)\n", True),
+    ("def test(monkeypatch):\n    monkeypatch.delattr(bl, '_LOADED')\n", True),
+    ("import polyjax as pj\nimport polyjax.render as pr\nfrom polyjax.internal import prepare_inputs\n", False),
+    ("from polyjax import __version__, internal\nfrom baselines import fit\n", False),
+    ("import jax._src.compilation_cache as cc\nfrom numpy import _NoValue\n", False),
+    ("def test(monkeypatch):\n    monkeypatch.setattr(pj, 'fit_polynomial', None)\n    monkeypatch.setenv('X', '1')\n",
+     False),
+    ('"""A docstring naming polyjax._fit.log and baselines._aot."""\n', False),
+    ("CODE = 'import polyjax, sys; print(polyjax.internal.TALL_ROWS)'\n", False),
+])
+def test_private_test_access_check(source, flagged):
+    assert (private_test_access("tests/test_x.py", source) != []) is flagged

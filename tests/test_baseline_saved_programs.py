@@ -1,9 +1,13 @@
 """Saved programs of ``baselines.fit`` (``baselines/_aot.py``): a second fresh process loads the first one's
-executable and gets the same numbers bit for bit; a damaged file is reported with its reason and replaced; the
-eager rules stay; and the plain numpy models of ``bench_latency.py``'s comparison are the baselines' models."""
+executable (it neither traces, lowers nor compiles) and gets the same numbers bit for bit; a damaged file is
+reported with its reason and replaced; the eager rules stay; and the plain numpy models of ``bench_latency.py``'s
+comparison are the baselines' models. Saved programs are on whenever the compilation cache is
+(``pj.enable_compilation_cache``); what a process compiled is counted from JAX's own events (:mod:`jax.monitoring`)."""
 
+import dataclasses
 import json
 import os
+import shutil
 import subprocess
 import sys
 import warnings
@@ -14,7 +18,6 @@ import numpy as np
 import pytest
 
 import baselines as bl
-import baselines._aot as aot
 import polyjax as pj
 from benchmarks import plain_models
 
@@ -22,23 +25,31 @@ from _problems import random_hemisphere
 
 ROOT = Path(__file__).resolve().parents[1]
 OPTIONS = dict(n_starts=4, max_steps=30)
+#: the array fields of a fit (those a saved program returns)
+FIELDS = tuple(f.name for f in dataclasses.fields(bl.BaselineFit) if not f.metadata.get("static", False))
 
 _CHILD = r"""
-import json, sys
+import json, sys, warnings
 import jax
 jax.config.update("jax_enable_x64", True)
+events = []
+jax.monitoring.register_event_duration_secs_listener(lambda event, duration, **kw: events.append(event))
 import numpy as np
 import polyjax as pj
 pj.enable_compilation_cache(sys.argv[1])
 import baselines as bl
-import baselines._aot as aot
-compiled = []
-original = aot._compile
-aot._compile = lambda *a: compiled.append(1) or original(*a)
 d = np.load(sys.argv[2])
-f = bl.fit("ward", d["u"], d["v"], d["values"], n_starts=4, max_steps=30)
-np.savez(sys.argv[3], **{k: np.asarray(getattr(f, k)) for k in aot._FIELDS})
-print(json.dumps(dict(compiled=len(compiled))))
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always", bl.SavedProgramWarning)
+    f = bl.fit("ward", d["u"], d["v"], d["values"], n_starts=4, max_steps=30)
+fields = sys.argv[4].split(",")
+np.savez(sys.argv[3], **{k: np.asarray(getattr(f, k)) for k in fields})
+print(json.dumps(dict(
+    compiled=events.count("/jax/core/compile/backend_compile_duration"),
+    built=events.count("/jax/core/compile/jaxpr_trace_duration")
+    + events.count("/jax/core/compile/jaxpr_to_mlir_module_duration"),
+    warnings=[str(w.message) for w in caught if issubclass(w.category, bl.SavedProgramWarning)],
+    name=f.name, backend=f.backend)))
 """
 
 
@@ -51,11 +62,13 @@ def problem():
 
 
 def _child(folder, inputs, out):
+    """A fresh process fitting Ward to ``inputs`` with the cache in ``folder``: what it compiled, traced or lowered
+    (JAX's events), its SavedProgramWarnings, and the fit's arrays in ``out``."""
     env = {k: v for k, v in os.environ.items() if k not in ("POLYJAX_CACHE", "JAX_ENABLE_COMPILATION_CACHE",
                                                           "POLYJAX_SAVED_PROGRAMS")}
     env["PYTHONPATH"] = str(ROOT)
-    proc = subprocess.run([sys.executable, "-c", _CHILD, str(folder), str(inputs), str(out)], cwd=ROOT, env=env,
-                          capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", _CHILD, str(folder), str(inputs), str(out), ",".join(FIELDS)],
+                          cwd=ROOT, env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -64,20 +77,29 @@ def _files(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
 
 
-def test_second_process_loads_the_saved_program_bitwise(tmp_path, problem):
-    """The first process compiles the whole fit once and writes it; the second loads it (nothing compiled, no file
-    added to the cache folder) and gets the first one's arrays bit for bit; both agree with the ordinary fit."""
+@pytest.fixture(scope="module")
+def first_process(tmp_path_factory, problem):
+    """The first process of a machine: ``(folder, inputs, its report, its arrays' file, the files it wrote)``."""
+    tmp = tmp_path_factory.mktemp("saved")
     u, v, values = problem
-    inputs, folder = tmp_path / "inputs.npz", tmp_path / "cache"
+    inputs, folder = tmp / "inputs.npz", tmp / "cache"
     np.savez(inputs, u=u, v=v, values=values)
-    first = _child(folder, inputs, tmp_path / "first.npz")
-    written = _files(folder)
-    assert first["compiled"] == 1
+    report = _child(folder, inputs, tmp / "first.npz")
+    return folder, inputs, report, tmp / "first.npz", _files(folder)
+
+
+def test_second_process_loads_the_saved_program_bitwise(tmp_path, problem, first_process):
+    """The first process compiles the whole fit once and writes it; the second loads it (nothing traced, lowered or
+    compiled, no file added to the cache folder) and gets the first one's arrays bit for bit; both agree with the
+    ordinary fit."""
+    u, v, values = problem
+    folder, inputs, first, first_out, written = first_process
+    assert first["compiled"] >= 1 and first["warnings"] == []
     assert len([f for f in written if f.startswith("polyjax-programs/baseline-")]) == 1, written
     second = _child(folder, inputs, tmp_path / "second.npz")
-    assert second["compiled"] == 0 and _files(folder) == written
-    a, b = np.load(tmp_path / "first.npz"), np.load(tmp_path / "second.npz")
-    assert sorted(a.files) == sorted(aot._FIELDS)
+    assert (second["compiled"], second["built"], second["warnings"]) == (0, 0, []) and _files(folder) == written
+    a, b = np.load(first_out), np.load(tmp_path / "second.npz")
+    assert sorted(a.files) == sorted(FIELDS)
     for name in a.files:
         assert a[name].dtype == b[name].dtype and np.array_equal(a[name], b[name]), name
     plain = bl.fit("ward", u, v, values, **OPTIONS)  # this process has no cache: the ordinary fit
@@ -86,34 +108,41 @@ def test_second_process_loads_the_saved_program_bitwise(tmp_path, problem):
     np.testing.assert_allclose(a["params"], np.asarray(plain.params), rtol=1e-6)
 
 
+@pytest.mark.slow  # two fresh processes, one compiling the fit
+def test_damaged_saved_program_is_reported_and_replaced(tmp_path, first_process):
+    """A process finding a damaged file reports it once, with its reason, fits without it (the same numbers) and
+    writes the program again; the next process loads that one, silently, compiling nothing."""
+    folder, inputs, _, first_out, written = first_process
+    cache = tmp_path / "cache"
+    shutil.copytree(folder, cache)
+    (path,) = (cache / "polyjax-programs").glob("baseline-*.bin")
+    path.write_bytes(b"not a saved program")
+    damaged = _child(cache, inputs, tmp_path / "damaged.npz")
+    assert len(damaged["warnings"]) == 1 and damaged["compiled"] >= 1
+    assert "could not be read (UnpicklingError: " in damaged["warnings"][0]
+    assert damaged["warnings"][0].endswith("; fitting without it")
+    assert (damaged["name"], damaged["backend"]) == ("ward", "optimistix")
+    first, again = np.load(first_out), np.load(tmp_path / "damaged.npz")
+    for name in FIELDS:
+        np.testing.assert_array_equal(again[name], first[name], name)
+    programs = [f for f in written if f.startswith("polyjax-programs/")]
+    assert [f for f in _files(cache) if f.startswith("polyjax-programs/")] == programs  # written again, in place
+    assert path.read_bytes() != b"not a saved program"
+    third = _child(cache, inputs, tmp_path / "third.npz")  # the file written again: loaded, nothing compiled
+    assert (third["compiled"], third["built"], third["warnings"]) == (0, 0, [])
+    assert np.array_equal(np.load(tmp_path / "third.npz")["l2"], first["l2"])
+
+
 @pytest.fixture
 def saved_here(tmp_path, monkeypatch):
-    """Saved programs in this process, kept in ``tmp_path``; the process's memo and reports emptied."""
-    folder = tmp_path / "polyjax-programs"
-    monkeypatch.setattr(aot, "saved_folder", lambda: folder)
-    monkeypatch.setattr(aot, "_LOADED", {})
-    monkeypatch.setattr(aot, "_REPORTED", set())
-    return folder
-
-
-def test_damaged_saved_program_is_reported_and_replaced(saved_here, problem, monkeypatch):
-    u, v, values = problem
-    first = bl.fit("ward", u, v, values, **OPTIONS)
-    (path,) = saved_here.glob("baseline-*.bin")
-    path.write_bytes(b"not a saved program")
-    monkeypatch.setattr(aot, "_LOADED", {})  # a fresh process: read from the file
-    with pytest.warns(aot.SavedProgramWarning, match=r"could not be read \(UnpicklingError: .*\); fitting without"):
-        again = bl.fit("ward", u, v, values, **OPTIONS)
-    for name in aot._FIELDS:
-        np.testing.assert_array_equal(np.asarray(getattr(again, name)), np.asarray(getattr(first, name)), name)
-    assert again.name == "ward" and again.backend == "optimistix"
-    monkeypatch.setattr(aot, "_LOADED", {})
-    calls = []
-    monkeypatch.setattr(aot, "_compile", lambda *a: calls.append(1))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", aot.SavedProgramWarning)
-        third = bl.fit("ward", u, v, values, **OPTIONS)  # the file written again: loaded, nothing compiled
-    assert calls == [] and np.array_equal(np.asarray(third.l2), np.asarray(first.l2))
+    """Saved programs in this process: the compilation cache (its switch, and the environment variable the saved
+    programs obey) in ``tmp_path``; returns the folder of the saved programs. The run's cache setting is put back
+    after the test (tests/conftest.py)."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv(pj.CACHE_ENV, str(folder))
+    monkeypatch.delenv("POLYJAX_SAVED_PROGRAMS", raising=False)
+    pj.enable_compilation_cache(folder)
+    return folder / "polyjax-programs"
 
 
 def test_saved_programs_keep_the_eager_rules(saved_here, problem):
@@ -127,8 +156,10 @@ def test_saved_programs_keep_the_eager_rules(saved_here, problem):
     with pytest.raises(pj.InputError, match="weights"):
         bl.fit("ward", u, v, values, weights=-np.ones(len(u)), **OPTIONS)
     assert not saved_here.exists()
-    short = bl.fit("ward", u, v, values, n_starts=2, max_steps=1, limit_steps=0)
-    assert np.all(np.asarray(short.status) == pj.Result.MAX_STEPS) and len(list(saved_here.glob("*.bin"))) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", bl.SavedProgramWarning)
+        short = bl.fit("ward", u, v, values, n_starts=2, max_steps=1, limit_steps=0)
+    assert np.all(np.asarray(short.status) == pj.RESULTS.MAX_STEPS) and len(list(saved_here.glob("*.bin"))) == 1
     with pytest.raises(pj.FitError):
         bl.fit("ward", u, v, values, n_starts=2, max_steps=1, limit_steps=0, throw=True)
 

@@ -14,7 +14,7 @@ import pytest
 import baselines
 import polyjax as pj
 import polyjax.render as pr
-from polyjax._arrays import cast_concrete, device_array
+from polyjax.internal import cast_concrete, device_array
 from tests._problems import random_hemisphere
 
 

@@ -268,72 +268,56 @@ def test_grid_directions_are_the_elementwise_formula_bit_for_bit():
 
 def test_loaded_grid_directions_are_taken_as_unit(tmp_path):
     """The loader's device directions of the full grid are remembered as unit vectors when it makes them (no
-    normalising pass in the first fit): they are, to rounding, what normalising gives."""
+    normalising pass in the first fit: a fit's prepared inputs are those very arrays, all valid): they are, to
+    rounding, what normalising gives. Other arrays, a copy of them included, are normalised."""
     import jax.numpy as jnp
 
-    from polyjax import _inputs, safe_normalize
-    from polyjax.data import _merl
-
-    _merl._device_grid.cache_clear()  # made again by the next load, as in a fresh process
+    pj.internal.forget_memos()  # the grid made again by the next load, as in a fresh process
     vals = np.zeros((3, pj.data.MERL_N_BINS))
     m = pj.data.load_merl_binary(pj.data.write_merl_binary(tmp_path / "zero.binary", vals))
-    assert _inputs._known_pair(m.u, m.v)
-    u, v, ok = _inputs._unit_directions(m.u, m.v)
-    assert u is m.u and v is m.v and bool(jnp.all(ok))
-    np.testing.assert_allclose(np.asarray(u), np.asarray(safe_normalize(m.u)[0]), rtol=0, atol=1e-15)  # 2 ulp
-
-
-def test_device_grid_is_the_grid_above_the_horizon_bit_for_bit():
-    """The loader's device arrays (built slab by slab, without the full grid) are ``merl_grid``'s arrays at the
-    bins above the horizon, to the last bit, in aligned buffers."""
-    from polyjax.data import _merl
-
-    for cached in (_merl._device_grid, _merl._above_index):
-        cached.cache_clear()
-    du, dv, dw, mask = _merl._device_grid(pj.data.MERL_RESOLUTION, "float64")
-    u, v, w, above = pj.data.merl_grid()
-    assert np.array_equal(_merl._above_index(pj.data.MERL_RESOLUTION), np.flatnonzero(above))
-    for got, want in ((du, u[above]), (dv, v[above]), (dw, w[above])):
-        assert np.array_equal(np.asarray(got), want)
-    assert mask.shape == (int(above.sum()),) and bool(np.all(np.asarray(mask)))
-
-
-@pytest.mark.parametrize("resolution", [(90, 90, 180), (7, 5, 12), (16, 11, 9)])
-def test_above_index_is_the_grid_above_the_horizon(resolution):
-    """The loader's above-horizon bins (``dz c > |dx s|``) are exactly ``merl_grid``'s (both z components
-    positive), at MERL's resolution and odd small ones."""
-    from polyjax.data import _merl
-
-    _merl._above_index.cache_clear()
-    assert np.array_equal(_merl._above_index(resolution), np.flatnonzero(pj.data.merl_grid(resolution)[3]))
+    inp, _ = pj.internal.prepare_inputs("fit_polynomial", m, None, None)
+    assert inp.u is m.u and inp.v is m.v and bool(jnp.all(inp.mask))
+    np.testing.assert_allclose(np.asarray(m.u), np.asarray(pj.safe_normalize(m.u)[0]), rtol=0, atol=1e-15)  # 2 ulp
+    copy = jnp.array(m.u)
+    assert pj.internal.prepare_inputs("fit_polynomial", copy, m.v, m.values)[0].u is not copy
 
 
 def test_first_load_makes_the_grid_beside_the_read_with_the_same_bits(tmp_path):
-    """The first load of a process (every grid memo forgotten) makes the grid in a thread while the file is read:
-    the Measurements are those of a later load, bit for bit, and the directions are ``merl_grid``'s above the
-    horizon; a later load hands out the same device arrays."""
-    from polyjax.data import _merl
-
+    """The first load of a process (every memo forgotten) makes the grid in a thread while the file is read, slab
+    by slab without the full grid: the Measurements are those of a later load, bit for bit, the directions and
+    weights ``merl_grid``'s above the horizon, every bin valid; a later load hands out the same device arrays."""
     rng = np.random.default_rng(3)
     path = pj.data.write_merl_binary(tmp_path / "r.binary", rng.uniform(0.0, 1.0, (3, pj.data.MERL_N_BINS)))
-    for cached in (_merl._device_grid, _merl._above_index):
-        cached.cache_clear()
+    pj.internal.forget_memos()
     first = pj.data.load_merl_binary(path)
     later = pj.data.load_merl_binary(path)
     u, v, w, above = pj.data.merl_grid()
     assert first.u is later.u and first.v is later.v and first.weights is later.weights
     for got, want in ((first.u, u[above]), (first.v, v[above]), (first.weights, w[above])):
         assert np.array_equal(np.asarray(got), want)
+    assert np.shape(first.mask) == (int(above.sum()),) and bool(np.all(np.asarray(first.mask)))
     raw, _ = pj.data.read_merl_binary(path)
     assert np.array_equal(np.asarray(first.values), raw[:, above]) and first.n_samples == int(above.sum())
+
+
+@pytest.mark.parametrize("resolution", [(7, 5, 12), (16, 11, 9)])
+def test_loaded_bins_are_the_grid_above_the_horizon(tmp_path, resolution):
+    """At odd small resolutions too, the loader's bins above the horizon (``dz c > |dx s|``, computed slab by slab)
+    are exactly ``merl_grid``'s (both z components positive), with its directions and weights, bit for bit."""
+    n = int(np.prod(resolution))
+    path = pj.data.write_merl_binary(tmp_path / "s.binary", np.full((3, n), 0.5), resolution=resolution)
+    pj.internal.forget_memos()
+    m = pj.data.load_merl_binary(path)
+    u, v, w, above = pj.data.merl_grid(resolution)
+    assert m.n_samples == int(above.sum()) < n
+    for got, want in ((m.u, u[above]), (m.v, v[above]), (m.weights, w[above])):
+        assert np.array_equal(np.asarray(got), want)
 
 
 def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
     """A call while the background computation of the same arguments is under way waits for it (the work is done
     once, the same value returned); an error there is raised by the caller's call, and not remembered."""
     import threading
-
-    from polyjax._cache.memo import GridMemo
 
     calls, started, release = [], threading.Event(), threading.Event()
 
@@ -353,7 +337,7 @@ def test_grid_memo_waits_for_the_work_under_way_and_raises_its_error():
         assert started.wait(10.0)
         threading.Timer(0.1, release.set).start()
 
-    memo = GridMemo(slow, maxsize=2)
+    memo = pj.internal.grid_memo(maxsize=2)(slow)
     under_way(1)
     value = memo(1)
     assert value == [1] and memo(1) is value and calls == [1]
@@ -375,10 +359,8 @@ def test_first_load_in_float32_is_the_grid_rounded(tmp_path):
 
     import jax
 
-    from polyjax.data import _merl
-
     path = pj.data.write_merl_binary(tmp_path / "h.binary", np.full((3, pj.data.MERL_N_BINS), 0.25))
-    _merl._device_grid.cache_clear()
+    pj.internal.forget_memos()
     with jax.enable_x64(False), warnings.catch_warnings():
         warnings.simplefilter("error")
         m = pj.data.load_merl_binary(path)
@@ -386,4 +368,4 @@ def test_first_load_in_float32_is_the_grid_rounded(tmp_path):
     assert m.u.dtype == np.float32 and m.weights.dtype == np.float32
     for got, want in ((m.u, u[above]), (m.v, v[above]), (m.weights, w[above])):
         assert np.array_equal(np.asarray(got), want.astype(np.float32))
-    _merl._device_grid.cache_clear()
+    pj.internal.forget_memos()

@@ -15,8 +15,7 @@ from _standard_problems import STANDARD_PARAMS, grey_fit
 
 import baselines as bl
 import polyjax as pj
-from baselines._models.openpbr import open_pbr_surface
-from baselines._models.usd_preview import usd_preview_surface
+from baselines import open_pbr_surface, usd_preview_surface
 
 from _baseline_problems import synthetic_geometry
 

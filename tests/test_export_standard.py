@@ -153,7 +153,7 @@ def test_mitsuba_xml_principled_renders_as_polyjax(tmp_path):
 
 
 def test_mitsuba_xml_roughplastic_and_roughconductor(tmp_path):
-    from polyjax.render._mitsuba import mitsuba_roughplastic
+    from polyjax.render import mitsuba_roughplastic
 
     model, _ = mitsuba_roughplastic(0.2, COLOURS, int_ior=1.5)
     material = {"model": "roughplastic", "alpha": 0.2, "diffuse_reflectance": COLOURS, "int_ior": 1.5}

@@ -7,7 +7,7 @@ import pytest
 
 import polyjax as pj
 import polyjax.render as pr
-from polyjax.render._linear import light_samples, render_linear
+from polyjax.render import light_samples, render_linear
 
 SIZE = 40
 PHONG = pr.Phong(kd=(0.3, 0.5, 0.7), ks=0.4, exponent=20.0)

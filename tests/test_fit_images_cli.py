@@ -33,10 +33,12 @@ def test_fit_images_command_recovers_the_api_fit(tmp_path, capsys):
                  str(tmp_path / "m.npz"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["images"] == 3 and out["status_rgb"] == ["OK", "OK", "OK"]
-    from polyjax.cli._fit_images import load_scene_json
-
-    scenes, images, target = load_scene_json(path)
-    api = pj.fit_polynomial_to_images(scenes, images, variables="lafortune", degree=4, target=target)
+    # the scene the JSON describes, built with the API, and the images as the command reads them
+    cam = pr.Camera(eye=(0.0, 0.0, 5.0), width=SIZE, height=SIZE, fov_deg=30.0)
+    sphere = pr.Sphere(pr.Lambertian(0.5), radius=1.0)  # a placeholder BRDF: the fit replaces it
+    scenes = [pr.Scene(cam, [sphere], [pr.PointLight(p, 30.0)]) for p in LIGHTS]
+    images = [pr.read_exr(tmp_path / f"light{i}.exr") for i in range(len(LIGHTS))]
+    api = pj.fit_polynomial_to_images(scenes, images, variables="lafortune", degree=4)
     saved = pj.load_model(tmp_path / "m.npz")
     np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-12)
     assert out["pixels_used"] == int(api.n_used[0]) > 500

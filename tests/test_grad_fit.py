@@ -12,8 +12,7 @@ import pytest
 from jax.test_util import check_grads
 
 import polyjax as pj
-from polyjax._solve.linalg import eigh
-from polyjax._solve.lstsq import TALL_ROWS
+from polyjax.internal import TALL_ROWS
 
 from _problems import curet
 from _robust_problems import random_hemisphere
@@ -197,34 +196,53 @@ def _symmetric_directions(n, seed=0):
     return np.concatenate(us), np.concatenate(vs)
 
 
+def _samples_of_covariance(c, n=40, seed=0):
+    """``(z, b)``: samples ``x = z b`` (``n x 3``) whose covariance (``fit_pca``'s, ``n - 1`` in the denominator) is
+    ``c = b^T b`` exactly: ``z`` centred and white."""
+    rng = np.random.default_rng(seed)
+    r = rng.normal(size=(n, 3))
+    q, _ = np.linalg.qr(r - r.mean(axis=0))
+    w, v = np.linalg.eigh(c)
+    return q * np.sqrt(n - 1.0), np.diag(np.sqrt(w)) @ v.T
+
+
 def test_eigh_rule_matches_finite_differences_and_holds_ties_fixed():
-    """Distinct eigenvalues: eigenvalues and (sign-fixed) eigenvectors against central differences.
-    A tied pair: finite; the tied eigenspace's projector and the sum of its eigenvalues are exact."""
+    """The PCA's eigh rule, through ``fit_pca`` of samples whose covariance moves along a symmetric ``t``.
+    Distinct eigenvalues: variances and (sign-fixed) directions against central differences. A tied pair:
+    finite; the tied eigenspace's projector and the sum of its variances are exact."""
     rng = np.random.default_rng(0)
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     t = rng.normal(size=(3, 3))
-    t = jnp.asarray(t + t.T)
+    t = t + t.T
 
-    def fixed_sign(a):
-        w, v = eigh(a)
-        return w, v * jnp.sign(v[0])[None, :]
+    def along(c):
+        """``x(e)`` with covariance ``c + e t`` to first order: ``x = z (b + e db)``, ``b^T db + db^T b = t``."""
+        z, b = _samples_of_covariance(c)
+        db = 0.5 * np.linalg.solve(b.T, t)
+        return jnp.asarray(z @ b), jnp.asarray(z @ db)
 
-    a = jnp.asarray(q @ np.diag([0.5, 1.0, 2.0]) @ q.T)
-    _, (dw, dv) = jax.jvp(fixed_sign, (a,), (t,))
-    ref = _central(lambda e: jnp.concatenate([x.ravel() for x in fixed_sign(a + e * t)]), 0.0, 1.0)
+    def pca(x):
+        p = pj.fit_pca(x)
+        return p.variance, p.rotation  # decreasing variances; the PCA's sign rule fixes each direction's sign
+
+    x, dx = along(q @ np.diag([0.5, 1.0, 2.0]) @ q.T)
+    _, (dw, dv) = jax.jvp(pca, (x,), (dx,))
+    ref = _central(lambda e: jnp.concatenate([a.ravel() for a in pca(x + e * dx)]), 0.0, 1.0)
     np.testing.assert_allclose(np.asarray(jnp.concatenate([dw, dv.ravel()])), np.asarray(ref), atol=1e-8)
+    np.testing.assert_allclose(np.asarray(dw), np.diag(np.asarray(pca(x)[1]).T @ t @ np.asarray(pca(x)[1])),
+                               atol=1e-10)  # d lambda_i = r_i^T dC r_i
 
-    tied = jnp.asarray(q @ np.diag([0.5, 2.0, 2.0]) @ q.T)
+    tied, dtied = along(q @ np.diag([0.5, 2.0, 2.0]) @ q.T)
 
-    def space(a):
-        w, v = eigh(a)
-        return jnp.concatenate([(v[:, 1:] @ v[:, 1:].T).ravel(), (w[1] + w[2])[None], w[:1]])
+    def space(x):
+        w, v = pca(x)
+        return jnp.concatenate([(v[:, :2] @ v[:, :2].T).ravel(), (w[0] + w[1])[None], w[2:]])
 
-    _, jv = jax.jvp(space, (tied,), (t,))
-    _, (dw, dv) = jax.jvp(eigh, (tied,), (t,))
+    _, jv = jax.jvp(space, (tied,), (dtied,))
+    _, (dw, dv) = jax.jvp(pca, (tied,), (dtied,))
     assert _finite((dw, dv))
-    np.testing.assert_allclose(np.asarray(jv), np.asarray(_central(space, tied, t)), atol=1e-8)
-    assert _finite(jax.jacrev(lambda a: eigh(a)[1])(tied))
+    np.testing.assert_allclose(np.asarray(jv), np.asarray(_central(space, tied, dtied)), atol=1e-8)
+    assert _finite(jax.jacrev(lambda x: pca(x)[1])(tied))
 
 
 def test_fit_at_tied_pca_eigenvalues():

@@ -142,32 +142,60 @@ def test_log_fit_grad_matches_finite_differences(geometry):
     np.testing.assert_allclose(float(jnp.dot(g, d)), float(fd), rtol=1e-5)
 
 
-@pytest.mark.parametrize("stream", [False, True])
-def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, geometry, stream):
-    """Lanes keeping the same samples run every solve in one program on their shared design (held whole, or streamed
-    as for tall data): the fit of one ``fit_polynomial`` call per solve, which lanes with samples of their own get."""
-    from polyjax._fit import log as _logfit
+FACTORISATIONS = ("qr", "svd", "eigh", "cholesky", "householder_product", "geqrf", "geqp3")
 
+
+def _programs_that_solve(fn, *args) -> int:
+    """How many programs (the top-level ``jit`` calls of ``fn``'s trace) factorise a matrix: the solves' programs."""
+
+    def solves(jaxpr) -> bool:
+        for eqn in jaxpr.eqns:
+            if eqn.primitive.name in FACTORISATIONS:
+                return True
+            for p in eqn.params.values():
+                for sub in p if isinstance(p, (list, tuple)) else (p,):
+                    inner = getattr(sub, "jaxpr", sub)
+                    if hasattr(inner, "eqns") and solves(inner):
+                        return True
+        return False
+
+    top = jax.make_jaxpr(fn)(*args).jaxpr.eqns
+    return sum(1 for eqn in top if "jaxpr" in eqn.params and solves(getattr(eqn.params["jaxpr"], "jaxpr",
+                                                                           eqn.params["jaxpr"])))
+
+
+@pytest.fixture(scope="module")
+def three_lanes(geometry):
+    """``(u, v, values (3, n), weights (n,), options, the fit of one fit_polynomial call per solve)``: lanes that may
+    keep different samples get that fit (here per-lane weights under ``jit``, the same in every lane: traced, their
+    zeros are unknown), as the trace's programs show: one program per solve, and the whole sequence in one program
+    for the weights shared by shape."""
     u, v = geometry
     lobe = _lobe(u, v)
     b = jnp.stack([lobe, 0.5 * lobe + 0.05, 0.2 + 0.1 * u[:, 0]])
     w = jnp.asarray(np.random.default_rng(2).uniform(0.5, 1.5, b.shape[-1]))
-    kw = dict(variables="rusinkiewicz", degree=3, weights=w, cutoff_deg=70.0)
+    kw = dict(variables="rusinkiewicz", degree=3, cutoff_deg=70.0)
 
-    def no_per_solve(*args, **kwargs):
-        raise AssertionError("the per-solve path was taken")
+    def per_lane(lane_w):
+        return pj.fit_log_polynomial(u, v, b, weights=lane_w, **kw)
 
-    monkeypatch.setattr(_logfit, "use_stream", lambda *args: stream)
-    monkeypatch.setattr(_logfit, "_gauss_newton", no_per_solve)
-    shared = pj.fit_log_polynomial(u, v, b, **kw)
-    monkeypatch.undo()
-    check = _logfit._check_inputs
-    monkeypatch.setattr(_logfit, "_same_samples", lambda *args: False)
-    monkeypatch.setattr(_logfit, "_check_inputs", lambda *args: check(*args)[:-1] + (False,))
-    per_solve = pj.fit_log_polynomial(u, v, b, **kw)
+    lane_w = jnp.broadcast_to(w, b.shape)
+    assert _programs_that_solve(lambda a: per_lane(a).l2, lane_w) >= 4  # 1 + steps solves, one program each
+    assert _programs_that_solve(lambda y: pj.fit_log_polynomial(u, v, y, weights=w, **kw).l2, b) == 1
+    return u, v, b, w, kw, jax.jit(per_lane)(lane_w)
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, three_lanes, stream):
+    """Lanes keeping the same samples run every solve in one program on their shared design (held whole, or streamed
+    as for tall data: here from 100 samples on, ``$POLYJAX_STREAM_ROWS``): the fit of one ``fit_polynomial`` call per
+    solve (:func:`three_lanes`)."""
+    u, v, b, w, kw, per_solve = three_lanes
+    monkeypatch.setenv("POLYJAX_STREAM_ROWS", "100" if stream else str(10**9))
+    shared = pj.fit_log_polynomial(u, v, b, weights=w, **kw)
     c = np.asarray(per_solve.coefficients)
     np.testing.assert_allclose(np.asarray(shared.coefficients), c, rtol=0, atol=1e-12 * np.abs(c).max())
     np.testing.assert_allclose(np.asarray(shared.l2), np.asarray(per_solve.l2), rtol=1e-12)
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(np.asarray(getattr(shared, field)), np.asarray(getattr(per_solve, field)))
-    assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, **kw).l2))
+    assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, weights=w, **kw).l2))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-from polyjax._solve.lstsq import TALL_ROWS
+from polyjax.internal import TALL_ROWS
 
 
 def _tall_problem(seed=0, m=12):

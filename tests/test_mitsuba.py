@@ -14,7 +14,7 @@ import polyjax.render as pr
 
 mi = pytest.importorskip("mitsuba")
 
-from polyjax.render._mitsuba import (  # noqa: E402
+from polyjax.render import (  # noqa: E402
     mitsuba_bsdf_eval,
     mitsuba_roughplastic,
     mitsuba_scene_dict,

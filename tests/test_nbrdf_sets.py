@@ -34,11 +34,20 @@ def _h5_bytes(weights, first_layer: int = 1) -> bytes:
     return buf.getvalue()
 
 
+def _half_diff_inputs(u, v):
+    """The network's inputs ``(h, d)`` in numpy: the half vector rotated to ``phi_h = 0``, ``(sin theta_h, 0,
+    cos theta_h)``, and the difference vector, ``u`` rotated by ``R_y(-theta_h) R_z(-phi_h)``."""
+    h = (u + v) / np.linalg.norm(u + v, axis=-1, keepdims=True)
+    th, ph = np.arccos(np.clip(h[:, 2], -1.0, 1.0)), np.arctan2(h[:, 1], h[:, 0])
+    x = np.cos(ph) * u[:, 0] + np.sin(ph) * u[:, 1]  # R_z(-phi_h) u
+    y = -np.sin(ph) * u[:, 0] + np.cos(ph) * u[:, 1]
+    d = np.stack([x * np.cos(th) - u[:, 2] * np.sin(th), y, x * np.sin(th) + u[:, 2] * np.cos(th)], axis=-1)
+    return np.concatenate([np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1), d], axis=-1)
+
+
 def _reference(weights, u, v):
     """The network of the format (module docstring of polyjax.data._nbrdf), evaluated in numpy."""
-    from polyjax.data._nbrdf import _half_diff_inputs
-
-    x = np.asarray(_half_diff_inputs(jnp.asarray(u), jnp.asarray(v)))
+    x = _half_diff_inputs(np.asarray(u, np.float64), np.asarray(v, np.float64))
     w1, b1, w2, b2, w3, b3 = (np.asarray(a, np.float64) for a in weights)
     a = np.maximum(x @ w1 + b1, 0)
     a = np.maximum(a @ w2 + b2, 0)

@@ -1,21 +1,15 @@
 """The ``polyjax render`` command on the built-in synthetic data."""
 
-import argparse
-
 import numpy as np
 
 import polyjax.render as pr
-from polyjax.cli._render import add_render_parser, run_render
+from polyjax.cli import main
 
 
 def test_render_command_writes_grid_and_psnr(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("POLYJAX_DATA", raising=False)
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers(dest="command")
-    add_render_parser(sub)
     out = tmp_path / "grid"
-    args = parser.parse_args(["render", "--degrees", "1,4", "--reference", "--size", "16", "--out", str(out)])
-    assert run_render(args) == 0
+    assert main(["render", "--degrees", "1,4", "--reference", "--size", "16", "--out", str(out)]) == 0
     img = pr.read_exr(out.with_suffix(".exr"))
     assert img.shape == (3 * 16 + 4 * 2, 3 * 16 + 4 * 2, 3)  # rows: measured, p=1, p=4; three materials
     assert out.with_suffix(".png").stat().st_size > 0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import polyjax.render as pr
-from polyjax.render._sampling import cosine_sample, hemisphere_to_square, square_to_hemisphere
+from polyjax.render import cosine_sample, hemisphere_to_square, square_to_hemisphere
 
 from _sampling_problems import (
     GRAZING,
@@ -164,21 +164,24 @@ def test_density_is_continuous_across_cell_edges():
         assert scale > 10 * 0.1 / np.pi  # a lobe well above the cosine floor
 
 
-def test_bilinear_tables_integrate_the_interpolant():
-    """The normalisation, row integrals and row CDF are exact for the bilinear interpolant of the nodes."""
-    from polyjax.render._sampling import bilinear_tables
-
+def test_tables_integrate_the_bilinear_density():
+    """The sampler's tables (its public ``density``, ``prefix`` and ``row_cdf``) are exact for the bilinear
+    interpolant of the density's nodes: the density integrates to 1, ``prefix`` holds its integrals along the rows
+    and ``row_cdf`` the CDF of its ``y``-marginal (what the exact inversion of ``warp`` relies on)."""
     n = 6
-    g = jnp.asarray(np.random.default_rng(0).random((n + 1, n + 1)))
-    q, prefix, row_cdf = bilinear_tables(g)
+    s = pr.importance_sampler(cook_torrance(), resolution=n, n_views=3)
     m = 600  # midpoint rule on sub-cells: exact for a bilinear function on each cell
     c = (np.arange(m) + 0.5) / m
     f = (c * n) - np.clip(np.floor(c * n), 0, n - 1)
     i = np.clip(np.floor(c * n), 0, n - 1).astype(int)
-    Q = np.asarray(q)
-    rows_x = (1 - f)[None, :] * Q[:, i] + f[None, :] * Q[:, i + 1]  # q at row nodes, x on the midpoints
-    np.testing.assert_allclose(np.asarray(prefix[:, -1]), rows_x.mean(axis=1), rtol=1e-12)
-    full = (1 - f)[:, None] * rows_x[i] + f[:, None] * rows_x[i + 1]
-    np.testing.assert_allclose(full.mean(), 1.0, rtol=1e-12)
-    np.testing.assert_allclose(float(row_cdf[-1]), 1.0, rtol=1e-12)
-    np.testing.assert_allclose(np.asarray(row_cdf[3]), full[: m // 2].mean() / 2, rtol=1e-12)
+    for j in range(s.n_views):
+        Q = np.asarray(s.density[j])
+        assert np.ptp(Q) > 0.1 * Q.max()  # a lobe, not a flat table
+        rows_x = (1 - f)[None, :] * Q[:, i] + f[None, :] * Q[:, i + 1]  # q at row nodes, x on the midpoints
+        np.testing.assert_allclose(np.asarray(s.prefix[j, :, -1]), rows_x.mean(axis=1), rtol=1e-12)
+        at = m // 2  # x = 1/2, a node of the 6-cell grid: the prefix there is the integral over [0, 1/2]
+        np.testing.assert_allclose(np.asarray(s.prefix[j, :, n // 2]), rows_x[:, :at].mean(axis=1) / 2, rtol=1e-12)
+        full = (1 - f)[:, None] * rows_x[i] + f[:, None] * rows_x[i + 1]
+        np.testing.assert_allclose(full.mean(), 1.0, rtol=1e-12)
+        np.testing.assert_allclose(float(s.row_cdf[j, -1]), 1.0, rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(s.row_cdf[j, 3]), full[: m // 2].mean() / 2, rtol=1e-12)

@@ -88,9 +88,12 @@ def test_newer_version_and_unknown_kind_are_clear_errors(tmp_path, ward_fit):
         pj.save_model(tmp_path / "x.npz", object())
 
 
-def test_model_kind_found_through_an_entry_point(tmp_path, monkeypatch):
-    """A package that polyjax never imports provides its kind through the entry point group polyjax.models."""
-    from polyjax import _io as _kinds
+def test_model_kind_found_through_an_entry_point(tmp_path):
+    """A package that polyjax never imports provides its kind through the entry point group polyjax.models: a fresh
+    process that has not imported it loads a model of that kind (found through the entry point), as it was saved."""
+    import os
+    import subprocess
+    from pathlib import Path
 
     (tmp_path / "toykinds.py").write_text(textwrap.dedent('''
         import equinox as eqx
@@ -110,20 +113,19 @@ def test_model_kind_found_through_an_entry_point(tmp_path, monkeypatch):
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toykinds\nVersion: 1.0\n")
     (dist / "entry_points.txt").write_text("[polyjax.models]\ntoykinds.Toy = toykinds:KIND\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(_kinds, "_REGISTRY", dict(_kinds._REGISTRY))
-    monkeypatch.setattr(_kinds, "_LOADED_ENTRY_POINTS", set())
-    import toykinds
-
-    toy = toykinds.Toy(jnp.asarray([1.5, 2.5]), label="t")
-    assert "toykinds.Toy" not in _kinds._REGISTRY
-    path = pj.save_model(tmp_path / "toy.npz", toy)
-    monkeypatch.setattr(_kinds, "_REGISTRY", {k: v for k, v in _kinds._REGISTRY.items() if k != "toykinds.Toy"})
-    monkeypatch.setattr(_kinds, "_LOADED_ENTRY_POINTS", set())
-    back = pj.load_model(path)
-    assert type(back) is toykinds.Toy and back.label == "t"
-    np.testing.assert_array_equal(np.asarray(back.scale), [1.5, 2.5])
-    monkeypatch.delitem(sys.modules, "toykinds")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(root)])}
+    path = tmp_path / "toy.npz"
+    save = ("import sys, jax.numpy as jnp, polyjax, toykinds\n"
+            f"polyjax.save_model({str(path)!r}, toykinds.Toy(jnp.asarray([1.5, 2.5]), label='t'))\n")
+    load = ("import sys, numpy as np, polyjax\n"
+            "assert 'toykinds' not in sys.modules\n"
+            f"back = polyjax.load_model({str(path)!r})\n"
+            "print(type(back).__module__, type(back).__name__, back.label, *np.asarray(back.scale))\n")
+    for code in (save, load):
+        out = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["toykinds", "Toy", "t", "1.5", "2.5"]
 
 
 def test_polyjax_does_not_import_baselines():

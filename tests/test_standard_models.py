@@ -95,7 +95,7 @@ def test_gltf_metal_limit_against_mitsuba_roughconductor():
     F = 1): the same GGX ``D``; Mitsuba's separable Smith ``G1(u) G1(v)`` against glTF's height-correlated
     ``1 / (1 + Lambda(u) + Lambda(v))`` (Heitz 2014), the ratio computed here."""
     pytest.importorskip("mitsuba")
-    from polyjax.render._mitsuba import mitsuba_bsdf_eval
+    from polyjax.render import mitsuba_bsdf_eval
 
     u, v = _hemi(60, 3), _hemi(60, 4)
     roughness = 0.5
@@ -116,7 +116,7 @@ def test_gltf_metal_limit_against_mitsuba_roughconductor():
 ])
 def test_principled_equals_mitsuba_principled_eval(params):
     pytest.importorskip("mitsuba")
-    from polyjax.render._mitsuba import mitsuba_bsdf_eval
+    from polyjax.render import mitsuba_bsdf_eval
 
     u, v = _hemi(60, 5), _hemi(60, 6)
     bsdf = {"type": "principled", "base_color": {"type": "rgb", "value": COLOURS.tolist()}, **params}

@@ -10,14 +10,15 @@ from _standard_problems import (
     STANDARD_MODELS,
     STANDARD_PARAMS,
     grey_fit,
+    hoffman_fresnel,
     openpbr_reference,
+    oren_nayar_bsdf,
     usd_preview_reference,
 )
 
 import baselines as bl
 import polyjax as pj
-from baselines._models.openpbr import open_pbr_surface
-from baselines._models.usd_preview import usd_preview_surface
+from baselines import open_pbr_surface, usd_preview_surface
 
 from _baseline_problems import synthetic_geometry
 
@@ -68,17 +69,22 @@ def test_usd_preview_matches_storms_preview_surface(pairs, case):
 
 def test_special_cases_of_the_closures(pairs):
     """EON is Lambert at zero diffuse roughness; Hoffman's F82 reaches ``F82 * Schlick`` at cos = 1/7 and is
-    Schlick's Fresnel for F82 = 1."""
-    from baselines._models import mx_microfacet as mx
-
-    u, v = (jnp.asarray(a) for a in pairs)
-    nv, nl = mx.clamp_cos(v[:, 2]), mx.clamp_cos(u[:, 2])
-    lv = mx.clamp_cos(jnp.sum(u * v, -1))
-    np.testing.assert_allclose(mx.eon_diffuse(nv, nl, lv, 0.0, 0.6), 0.6, rtol=1e-7)
-    c = jnp.asarray([1 / 7, 0.3, 0.9])
+    Schlick's Fresnel for F82 = 1: the reference closures (tests/_standard_problems.py) have these properties, and
+    ``open_pbr_surface`` is the reference on the materials that use them (a dielectric base of zero diffuse
+    roughness; metals whose F82 tint is white, and tinted)."""
+    u, v = pairs
+    nl = np.clip(u[:, 2], 1e-8, 1.0)  # the reference clamps the cosines at its EPS
+    np.testing.assert_allclose(oren_nayar_bsdf(u, v, 1.0, 0.6, 0.0), 0.6 * nl / np.pi, rtol=1e-7)
+    c = np.asarray([1 / 7, 0.3, 0.9])
     schlick = 0.4 + 0.6 * (1 - c) ** 5
-    np.testing.assert_allclose(mx.fresnel_f82(c, 0.4, 0.5)[0], 0.5 * schlick[0], rtol=1e-12)
-    np.testing.assert_allclose(mx.fresnel_f82(c, 0.4, 1.0), schlick, rtol=1e-12)
+    np.testing.assert_allclose(hoffman_fresnel(c, 0.4, 0.5, 1.0, 5.0)[0], 0.5 * schlick[0], rtol=1e-12)
+    np.testing.assert_allclose(hoffman_fresnel(c, 0.4, 1.0, 1.0, 5.0), schlick, rtol=1e-12)
+    common = dict(specular_roughness=0.35, specular_ior=1.5, base_diffuse_roughness=0.0)
+    for p in (dict(common, base_color=0.6, specular_color=0.9, base_metalness=0.0),
+              dict(common, base_color=0.4, specular_color=1.0, base_metalness=1.0),
+              dict(common, base_color=0.4, specular_color=0.5, base_metalness=1.0)):
+        ours = np.asarray(jax.jit(open_pbr_surface)(p, u, v))
+        np.testing.assert_allclose(ours, openpbr_reference(p, u, v), rtol=1e-10, atol=1e-12)
 
 
 def test_reciprocity_where_the_model_is_reciprocal(pairs):

@@ -1,5 +1,11 @@
 """The streamed fit's geometry (``polyjax/_fit/stream.py``): a QR of the weighted design as accurate as Householder's,
-whichever way its preconditioner was found (a sample of the rows, every row, or a further pass)."""
+whichever way its preconditioner was found (a sample of the rows, every row, or a further pass), and the geometry
+kept on disk beside the compilation cache (``polyjax/_cache/geometry.py``), found again, checked, never trusted.
+
+Observed from outside: fits stream from :data:`STREAM_FROM` samples on (``$POLYJAX_STREAM_ROWS``), and with the
+compilation cache on every streamed fit keeps its geometry in ``<cache>/polyjax-geometry/geometry-<key>.npz`` (its
+factors, and how many passes over the rows they took): a file written is a geometry computed, a file left as it was
+is a geometry loaded (a computed one is always written)."""
 
 import jax
 import jax.numpy as jnp
@@ -7,12 +13,10 @@ import numpy as np
 import pytest
 
 import polyjax as pj
-import polyjax._cache.keys as keys
-import polyjax._cache.memo as memo
-import polyjax._fit.stream as stream_mod
-from polyjax._basis import term_degrees
 
-N = 2600  # with blocks of 512 rows: 5 blocks and a remainder; the sample is every 2nd row (n // 1024 = 2)
+N = 9000  # in the streamed fit's blocks of 4096 rows: two blocks and a remainder
+STREAM_FROM = 5000
+STRIDE = 8  # the preconditioner's sample: every N // 1024 = 8th row (at most every 16th, at least 1024 rows)
 
 
 def _directions(rng, n, narrow=False):
@@ -26,23 +30,59 @@ def _directions(rng, n, narrow=False):
 def _problem(seed=0, narrow_sample=False):
     rng = np.random.default_rng(seed)
     u, v = _directions(rng, N), _directions(rng, N)
-    if narrow_sample:  # the sampled rows (even ones) unlike the whole: the preconditioner is poor
-        u[::2], v[::2] = _directions(rng, N // 2, True), _directions(rng, N // 2, True)
+    if narrow_sample:  # the sampled rows unlike the whole: the preconditioner is poor
+        n = len(u[::STRIDE])
+        u[::STRIDE], v[::STRIDE] = _directions(rng, n, True), _directions(rng, n, True)
     weights = rng.uniform(0.5, 1.5, N)
     return u, v, weights
 
 
-def _geometry(u, v, weights, variables="lafortune", degree=4):
+def _values(u, v, seed=0):
+    h = u + v
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    rng = np.random.default_rng(seed)
+    return np.stack([0.1 + c * h[:, 2] ** (8 * c + 2) + 0.01 * rng.normal(size=len(u)) for c in range(3)])
+
+
+@pytest.fixture
+def kept(monkeypatch, tmp_path):
+    """Streamed fits from :data:`STREAM_FROM` samples on, the compilation cache (and so the kept geometries) in
+    ``tmp_path``: returns the folder of the geometries. Every in-process memo forgotten before and after."""
+    monkeypatch.setenv("POLYJAX_STREAM_ROWS", str(STREAM_FROM))
+    folder = tmp_path / "cache"
+    monkeypatch.setenv(pj.CACHE_ENV, str(folder))
+    pj.enable_compilation_cache(folder)
+    pj.internal.forget_memos()
+    yield folder / "polyjax-geometry"
+    pj.internal.forget_memos()
+
+
+def _files(folder) -> dict:
+    """The kept geometries: file name -> (inode, modification time); a file written again (atomically, by a rename)
+    gets a new inode."""
+    return {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in sorted(folder.glob("geometry-*.npz"))}
+
+
+def _read(path) -> dict:
+    with np.load(path) as f:
+        return {name: f[name] for name in f.files}
+
+
+def _fit_fresh(u, v, values, weights, degree=4, variables="lafortune"):
+    """A fit as the first one of a process: every in-process memo forgotten."""
+    pj.internal.forget_memos()
+    return pj.fit_polynomial(u, v, values, variables, degree, weights=weights)
+
+
+def _geometry(folder, u, v, weights, variables="lafortune", degree=4):
+    """The geometry a streamed fit keeps (read from its file), and the dense, equilibrated weighted design it stands
+    for."""
+    _fit_fresh(u, v, _values(u, v), weights, degree, variables)
+    (path,) = folder.glob("geometry-*.npz")
     x = pj.explanatory_variables(variables, u, v)
     w, wc2 = pj.internal.fit_weights(u, v, weights, None, 80.0)
-    k = x.shape[1]
-    active = jnp.asarray(term_degrees(k, degree, False))[None, :] <= jnp.asarray([degree])[:, None]
-    geo = jax.jit(lambda x, w, wc2: stream_mod.stream_geometry(
-        x, w, wc2, active, max_degree=degree, basis="legendre", interactions=False, block=512))(x, w, wc2)
-    # the dense, equilibrated weighted design the geometry stands for
     _, _, _, d = pj.fitted_design(x, w > 0, degree)
-    a = np.asarray(d) * np.sqrt(np.asarray(wc2))[:, None]
-    return geo, a
+    return _read(path), np.asarray(d) * np.sqrt(np.asarray(wc2))[:, None]
 
 
 def _check_qr(geo, a):
@@ -59,97 +99,58 @@ def _check_qr(geo, a):
     assert bool(geo["ok"])
 
 
-def test_geometry_from_a_sample_of_the_rows_is_a_householder_grade_qr():
-    geo, a = _geometry(*_problem())
+@pytest.mark.parametrize("variables,degree", [("lafortune", 4), ("ashikhmin-shirley", 3)])
+def test_geometry_from_a_sample_of_the_rows_is_a_householder_grade_qr(kept, variables, degree):
+    geo, a = _geometry(kept, *_problem(), variables, degree)
     assert int(geo["passes"]) == 1 and bool(geo["sampled"])  # the sample preconditions well: one pass, every row
     _check_qr(geo, a)
 
 
-def test_a_sample_without_full_rank_falls_back_to_every_row():
+def test_a_sample_without_full_rank_falls_back_to_every_row(kept):
     u, v, weights = _problem(1)
-    weights[::2] = 0.0  # the sampled rows carry no weight: their Gram matrix is zero, its Cholesky factor fails
-    geo, a = _geometry(u, v, weights)
+    weights[::STRIDE] = 0.0  # the sampled rows carry no weight: their Gram matrix is zero, its Cholesky factor fails
+    geo, a = _geometry(kept, u, v, weights)
     assert int(geo["passes"]) == 2 and not bool(geo["sampled"])  # CholeskyQR2 itself: G of every row, then Q_1
     _check_qr(geo, a)
 
 
-def test_a_sample_unlike_the_whole_gets_a_further_pass():
-    geo, a = _geometry(*_problem(2, narrow_sample=True), degree=5)
-    assert int(geo["passes"]) == 2 and bool(geo["sampled"])  # Q_1 far from orthogonal: Q_1 R_2^{-1} once more
-    _check_qr(geo, a)
-
-
 @pytest.mark.parametrize("variables,degree", [("lafortune", 5), ("ashikhmin-shirley", 3)])
-def test_forced_further_pass_gives_the_same_factor(monkeypatch, variables, degree):
-    u, v, weights = _problem(3)
-    geo, a = _geometry(u, v, weights, variables, degree)
-    monkeypatch.setattr(stream_mod, "PRECONDITION_CONDITION", 1.0)  # every Q_1 counts as far from orthogonal
-    geo3, _ = _geometry(u, v, weights, variables, degree)
-    assert int(geo["passes"]) == 1 and int(geo3["passes"]) == 2 and bool(geo3["sampled"])
-    _check_qr(geo3, a)
-    np.testing.assert_allclose(geo3["s"], geo["s"], rtol=1e-13)
+def test_a_sample_unlike_the_whole_gets_a_further_pass(kept, variables, degree):
+    """``Q_1`` far from orthogonal: a further pass, ``Q_1 R_2^{-1}`` once more, gives the factor of Householder QR."""
+    geo, a = _geometry(kept, *_problem(2, narrow_sample=True), variables, degree)
+    assert int(geo["passes"]) == 2 and bool(geo["sampled"])
+    _check_qr(geo, a)
 
 
 # the geometry kept on disk (polyjax/_cache/geometry.py)
 
-@pytest.fixture
-def kept(monkeypatch, tmp_path):
-    """Streamed fits from 2000 rows on (blocks of 512) with the geometry kept in ``tmp_path``; counts the geometries
-    computed (not loaded)."""
-    import polyjax._cache.geometry as store
-    import polyjax._fit.closed_form as fit_mod
-
-    monkeypatch.setattr(stream_mod, "STREAM_ROWS", 2000)
-    monkeypatch.setattr(stream_mod, "BLOCK", 512)
-    monkeypatch.setattr(store, "store_folder", lambda: tmp_path)
-    computed = []
-    original = fit_mod._geometry_kernel
-
-    def counting(*args, **kwargs):
-        if not any(isinstance(a, jax.core.Tracer) for a in jax.tree.leaves(args)):  # not jax.eval_shape's call
-            computed.append(1)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(fit_mod, "_geometry_kernel", counting)
-    for kernel in (fit_mod._fit_kernel, original):
-        kernel.clear_cache()  # BLOCK is read when a kernel is traced
-    memo._GEOMETRY_MEMO.clear()
-    yield computed, tmp_path
-    memo._GEOMETRY_MEMO.clear()
-    for kernel in (fit_mod._fit_kernel, original):
-        kernel.clear_cache()
-
-
-def _fit_fresh(u, v, values, weights, degree=4):
-    """A fit as the first one of a process: the in-process geometry memo forgotten."""
-
-    memo._GEOMETRY_MEMO.clear()
-    return pj.fit_polynomial(u, v, values, "lafortune", degree, weights=weights)
-
-
-def _values(u, v, seed=0):
-    h = u + v
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    rng = np.random.default_rng(seed)
-    return np.stack([0.1 + c * h[:, 2] ** (8 * c + 2) + 0.01 * rng.normal(size=len(u)) for c in range(3)])
-
-
-def test_kept_geometry_is_loaded_and_gives_the_same_fit(kept):
-    computed, folder = kept
+@pytest.mark.parametrize("variables,degrees", [("lafortune", 4), ("ashikhmin-shirley", [1, 3])])
+def test_kept_geometry_is_loaded_and_gives_the_same_fit(kept, variables, degrees):
+    """A later process's first fit on the same samples loads the kept geometry (its shapes and dtypes, for one
+    degree or several, are those it is checked against) and makes its per-sample rows, block by block, inside the
+    fit: the same fit as the cold one to rounding, on samples some of which a zero weight or the mask drops."""
     u, v, weights = _problem(4)
+    weights[::7] = 0.0
+    mask = np.ones(N, bool)
+    mask[3::11] = False
     values = _values(u, v)
-    cold = _fit_fresh(u, v, values, weights)
-    assert len(computed) == 1 and len(list(folder.glob("geometry-*.npz"))) == 1
-    warm = _fit_fresh(u, v, values, weights)
-    assert len(computed) == 1  # loaded, not computed
-    for field in ("l2", "coefficients", "condition", "mean", "rotation", "centre", "halfwidth"):
-        np.testing.assert_allclose(getattr(warm, field), getattr(cold, field), rtol=1e-14, atol=1e-15)
-    dense = jax.jit(lambda y: pj.fit_polynomial(u, v, y, "lafortune", 4, weights=weights))(values)
+
+    def fit():
+        pj.internal.forget_memos()
+        return pj.fit_polynomial(u, v, values, variables, degrees, weights=weights, mask=mask)
+
+    cold = fit()
+    written = _files(kept)
+    assert len(written) == 1
+    warm = fit()
+    assert _files(kept) == written  # loaded, not computed (a computed geometry is written)
+    for field in ("l2", "coefficients", "condition", "mean", "rotation", "centre", "halfwidth", "n_used"):
+        np.testing.assert_allclose(getattr(warm, field), getattr(cold, field), rtol=1e-13, atol=1e-14)  # rounding
+    dense = jax.jit(lambda y: pj.fit_polynomial(u, v, y, variables, degrees, weights=weights, mask=mask))(values)
     np.testing.assert_allclose(warm.l2, dense.l2, rtol=1e-10)
 
 
 def test_kept_geometry_is_not_used_when_its_inputs_differ(kept):
-    computed, folder = kept
     u, v, weights = _problem(5)
     values = _values(u, v)
     _fit_fresh(u, v, values, weights)
@@ -160,117 +161,77 @@ def test_kept_geometry_is_not_used_when_its_inputs_differ(kept):
     other_v[[7, 8]] = other_v[[8, 7]]  # two view directions swapped
     swapped = _fit_fresh(u, other_v, values, weights)
     _fit_fresh(u, v, values, weights, degree=3)  # other options
-    assert len(computed) == 4 and len(list(folder.glob("geometry-*.npz"))) == 4
+    assert len(_files(kept)) == 4  # four geometries computed
     dense = jax.jit(lambda v, y, w: pj.fit_polynomial(u, v, y, "lafortune", 4, weights=w))
     np.testing.assert_allclose(changed.l2, dense(v, values, other_w).l2, rtol=1e-10)
     np.testing.assert_allclose(swapped.l2, dense(other_v, values, weights).l2, rtol=1e-10)
 
 
 def test_damaged_or_foreign_kept_geometry_is_ignored(kept):
-    import polyjax._cache.geometry as store
-
-    computed, folder = kept
     u, v, weights = _problem(6)
     values = _values(u, v)
     reference = _fit_fresh(u, v, values, weights)
-    (path,) = folder.glob("geometry-*.npz")
-    key = path.stem.removeprefix("geometry-")
+    (path,) = kept.glob("geometry-*.npz")
+    size = path.stat().st_size
+
+    def computed_again() -> bool:
+        before = path.stat().st_ino
+        np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
+        return path.stat().st_ino != before and path.stat().st_size == size
+
     path.write_bytes(path.read_bytes()[:-100])  # truncated
-    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
-    assert len(computed) == 2
-    with np.load(path) as f:  # a changed factor under the old checksum
-        arrays = {name: f[name] for name in f.files}
+    assert computed_again()
+    arrays = _read(path)  # a changed factor under the old checksum
     arrays["r2"] = arrays["r2"] * 1.01
     np.savez(path, **arrays)
-    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
-    assert len(computed) == 3
-    # another grid's geometry written under this key, with a valid checksum: its samples and weight do not match
-
+    assert computed_again()
+    # another grid's geometry, with a valid checksum, written under this key: its samples and weight do not match
     u2, v2, w2 = _problem(7)
     w2[:100] = 0.0
-    memo._GEOMETRY_MEMO.clear()
-    other = pj.fit_polynomial(u2, v2, _values(u2, v2), "lafortune", 4, weights=w2)
+    other = _fit_fresh(u2, v2, _values(u2, v2), w2)
     assert np.all(np.asarray(other.status) == pj.RESULTS.OK)
-    foreign = memo._GEOMETRY_MEMO["last"]["geo"]
-    store.save(folder, key, foreign)
-    n_computed = len(computed)
-    np.testing.assert_allclose(_fit_fresh(u, v, values, weights).l2, reference.l2, rtol=1e-14)
-    assert len(computed) == n_computed + 1
+    (foreign,) = set(kept.glob("geometry-*.npz")) - {path}
+    np.savez(path, **dict(_read(foreign), key=_read(path)["key"]))
+    assert computed_again()
+    assert computed_again() is False  # the geometry written again is loaded again (the check itself can fail)
 
 
-def test_loader_grid_directions_are_named_not_checksummed():
-    """The MERL loader's grid directions are fingerprinted by name (made by polyjax's code, which is in the key);
-    any other array, a copy of them included, by the CRC-32 of its bytes."""
-    from polyjax.data import _merl
-
-    u, v, w, _ = _merl._device_grid(pj.data.MERL_RESOLUTION, "float64")
-    assert keys.fingerprint(u) == "merl-grid:(90, 90, 180):float64:u"
-    assert keys.fingerprint(v) == "merl-grid:(90, 90, 180):float64:v"
-    copy = jnp.array(u)
-    assert keys.fingerprint(copy) == keys.fingerprint(np.asarray(u)) != keys.fingerprint(u)
-    changed = np.asarray(u).copy()
-    changed[12345, 1] = np.nextafter(changed[12345, 1], 2.0)
-    assert keys.fingerprint(changed) != keys.fingerprint(copy)
-
-
-@pytest.mark.parametrize("variables,degrees", [("lafortune", [4]), ("ashikhmin-shirley", [1, 3])])
-def test_kept_fields_template_is_the_geometry_shape(variables, degrees):
-    """The shapes and dtypes a kept geometry is checked against are those the geometry has."""
-    import polyjax._cache.geometry as store
-    import polyjax._fit.closed_form as fit_mod
-    from polyjax import n_terms
-    from polyjax.internal import prepare_inputs
-
-    u, v, weights = _problem(8)
-    inp, _ = prepare_inputs("fit_polynomial", u, v, _values(u, v), weights, None, cutoff_deg=80.0)
-    static = dict(variables=variables, max_degree=max(degrees), basis="legendre", interactions=False,
-                  cutoff_deg=80.0)
-    shapes = jax.eval_shape(lambda i: fit_mod._geometry_kernel(i, np.asarray(degrees, np.int32), **static), inp)
-    k = pj.get_variables(variables).k
-    want = store.template(k, n_terms(k, max(degrees), False), len(degrees), inp.u.dtype)
-    assert {f: (shapes[f].shape, shapes[f].dtype) for f in store.FIELDS} == {
-        f: (want[f].shape, want[f].dtype) for f in store.FIELDS}
-
-
-def test_kept_rows_block_by_block_are_the_whole_rows():
-    """The rows of a kept transform made block by block (5 blocks and a remainder) are those made over the whole
-    arrays at once: ``t`` and ``w cos^2 theta_u`` bit for bit, the samples used exactly, the total weight to
-    rounding (summed in another order)."""
-    u, v, weights = _problem(9)
-    weights[::7] = 0.0
-    mask = np.ones(N, bool)
-    mask[3::11] = False
-    geo, _ = _geometry(u, v, weights)
-    transform = [geo[f] for f in ("mean", "rotation", "centre", "halfwidth")]
-
-    def sample(u, v, w, m):
-        wl, wc2l = pj.internal.fit_weights(u, v, w, m, 80.0)
-        return pj.explanatory_variables("lafortune", u, v), wl, wc2l
-
-    whole = jax.jit(lambda *a: stream_mod.stream_rows(*sample(*a), *transform))(u, v, weights, mask)
-    blocks = jax.jit(lambda *a: stream_mod.kept_rows(sample, a, *transform, block=512))(u, v, weights, mask)
-    assert np.array_equal(blocks["t"], whole["t"]) and np.array_equal(blocks["wc2"], whole["wc2"])
-    assert int(blocks["n_used"]) == int(whole["n_used"]) == int(np.sum((weights > 0) & mask
-                                                                      & (np.asarray(whole["wc2"]) > 0)))
-    np.testing.assert_allclose(blocks["den"], whole["den"], rtol=1e-14)
+def test_kept_geometry_of_a_loader_grid_serves_a_later_process(kept, tmp_path):
+    """Every MERL file on one grid has the same directions, weights and mask: the geometry kept by the first fit is
+    found by a later process's fit of another material on that grid (its own load of the grid), and gives the fit of
+    a geometry computed for it."""
+    resolution = (24, 24, 48)
+    rng = np.random.default_rng(3)
+    paths = [pj.data.write_merl_binary(tmp_path / f"m{i}.binary", rng.uniform(0.1, 1.0, (3, int(np.prod(resolution)))),
+                                       resolution=resolution) for i in range(2)]
+    first = pj.data.load_merl_binary(paths[0])
+    assert first.n_samples >= STREAM_FROM
+    pj.fit_polynomial(first, variables="lafortune", degree=2)
+    kept_files = _files(kept)
+    assert len(kept_files) == 1
+    pj.internal.forget_memos()  # a later process
+    second = pj.data.load_merl_binary(paths[1])
+    assert second.u is not first.u
+    fit = pj.fit_polynomial(second, variables="lafortune", degree=2)
+    assert _files(kept) == kept_files  # loaded, not computed
+    dense = jax.jit(lambda d: pj.fit_polynomial(d, variables="lafortune", degree=2))(second)
+    np.testing.assert_allclose(fit.l2, dense.l2, rtol=1e-10)
 
 
 def test_fit_after_a_kept_geometry_reuses_its_rows(kept):
     """The first fit on a kept geometry makes its rows inside the fit's program; the next fit on the same samples
-    uses that completed geometry (nothing computed or read again) and agrees with a fit on the cold geometry."""
-
-    computed, folder = kept
+    uses that completed geometry (nothing computed, nothing read: the files are gone) and agrees with a fit on the
+    cold geometry."""
     u, v, weights = _problem(10)
     values = _values(u, v)
     u, v = jnp.asarray(u), jnp.asarray(v)  # the same device arrays for every fit (as a loader's grid)
     cold = _fit_fresh(u, v, values, weights)
     warm = _fit_fresh(u, v, values, weights)
-    geo = memo._GEOMETRY_MEMO["last"]["geo"]
-    assert len(computed) == 1 and set(geo) >= {"t", "wc2"} and "sw" not in geo
-    for path in folder.glob("geometry-*.npz"):
+    assert len(_files(kept)) == 1
+    for path in kept.glob("geometry-*.npz"):
         path.unlink()  # the memo, not the disk, serves the next fit
     later = pj.fit_polynomial(u, v, values * 2.0, "lafortune", 4, weights=weights)
-    assert len(computed) == 1 and memo._GEOMETRY_MEMO["last"]["geo"] is geo
+    assert _files(kept) == {}  # nothing computed (a computed geometry would be written)
     np.testing.assert_allclose(warm.l2, cold.l2, rtol=1e-14)
     np.testing.assert_allclose(later.l2, 2.0 * cold.l2, rtol=1e-13)
     np.testing.assert_allclose(later.coefficients, 2.0 * cold.coefficients, rtol=1e-12, atol=1e-14)

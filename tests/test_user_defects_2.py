@@ -2,6 +2,7 @@
 strict JSON, model file suffixes, baseline exports and lane selection, lists as inputs, traced input rules, ...)."""
 
 import json
+import os
 
 import jax
 import jax.numpy as jnp
@@ -180,22 +181,8 @@ def test_ragged_list_is_an_input_error_naming_the_argument(problem):
         pj.fit_polynomial(u[:2], v[:2], [[0.1, 0.2], [0.3]], degree=1)
 
 
-# ---------------------------------------------------------------- 7: the "compiling" line only when compiling
-def test_compile_notice_is_quiet_while_the_cache_reads_programs_it_holds(monkeypatch):
-    import io
-    import time
-    from pathlib import Path
-
-    import polyjax._cache.compilation as cache_mod
-    import polyjax.cli._progress as progress_mod
-
-    monkeypatch.setattr(progress_mod.compile_notice, "printed", False)
-    # a warm run loading a large program: a look-up not yet answered, and no miss (nothing is compiled)
-    monkeypatch.setattr(cache_mod, "_counts", {"requests": 4, "answered": 3, "misses": 0})
-    quiet = io.StringIO()
-    with progress_mod.compile_notice("the fit", Path("cache"), delay=0.0, stream=quiet):
-        time.sleep(0.3)
-    assert quiet.getvalue() == ""
+# ---------------------------------------------------------------- 7: the "compiling" line only when compiling:
+# tests/test_latency.py::test_compile_notice_and_progress_line_say_what_is_happening
 
 
 # ---------------------------------------------------------------- 9: one rule eager and traced
@@ -223,15 +210,23 @@ def test_negative_weights_refused_eagerly_and_flagged_under_jit_never_clipped(pr
 
 # ---------------------------------------------------------------- 12: every variable set in --help, a --link flag
 def test_fit_help_lists_every_variable_set_and_a_link_flag(monkeypatch):
+    import subprocess
+    import sys
+    from pathlib import Path
+
     from polyjax.cli import build_parser
 
     monkeypatch.setenv("COLUMNS", "2000")  # one line per option: names are not wrapped at their hyphens
     sub = build_parser("fit")._subparsers._group_actions[0].choices["fit"]
     text = sub.format_help().replace("\n", " ")
     text = " ".join(text.split())
-    from polyjax.cli._args import BUILTIN_VARIABLES
-
-    for name in BUILTIN_VARIABLES:  # the built-in sets (other tests of the process register their own)
+    # the built-in sets: those of a fresh process (other tests of this one register their own)
+    root = Path(__file__).resolve().parents[1]
+    fresh = subprocess.run([sys.executable, "-c", "import polyjax; print(*polyjax.variable_sets())"], cwd=root,
+                           capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(root)})
+    builtin = fresh.stdout.split()
+    assert fresh.returncode == 0 and "lafortune" in builtin and len(builtin) >= 6, fresh.stderr
+    for name in builtin:
         assert name in text, name
     assert "--link {identity,log}" in text
 
@@ -358,68 +353,8 @@ def test_fit_images_example_is_written_and_fits(capsys, tmp_path):
     _one_error_line(capsys, "camera.fov_deg", "expected a number", "'wide'")
 
 
-# ---------------------------------------------------------------- 17: progress, cache info|clear, a size cap
-class _Terminal:
-    def __init__(self):
-        self.text = ""
-
-    def isatty(self):
-        return True
-
-    def write(self, s):
-        self.text += s
-
-    def flush(self):
-        pass
-
-
-def test_long_work_shows_an_elapsed_time_line_on_a_terminal_only(monkeypatch):
-    import io
-    import time
-
-    from polyjax.cli._progress import progress_line
-
-    monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
-    term, pipe = _Terminal(), io.StringIO()
-    with progress_line("fitting ward", after=0.0, interval=0.05, stream=term):
-        time.sleep(0.3)
-    with progress_line("fitting ward", after=0.0, interval=0.05, stream=pipe):
-        time.sleep(0.1)
-    assert term.text.count("\rpolyjax: fitting ward: ") >= 2 and term.text.endswith("\r\033[K")
-    assert pipe.getvalue() == ""
-    quick = _Terminal()
-    with progress_line("fitting ward", after=5.0, stream=quick):  # a short fit: nothing
-        pass
-    assert quick.text == ""
-
-
-def test_progress_line_names_the_stage(monkeypatch):
-    """The line's stage follows JAX's own events: after a real compile of a new program, ``running``; after a
-    trace (or lowering) event, ``compiling`` with the programs ready since the block began; and the line shows it."""
-    import time
-
-    import jax.monitoring
-
-    from polyjax.cli import _progress
-
-    _progress._listen()
-    ready = _progress._EVENTS["ready"]
-    jax.jit(lambda x: x * 3.0 + 0.25)(np.arange(7.0))  # a program no test compiled: traced, lowered, compiled
-    assert _progress._EVENTS["ready"] >= ready + 1
-    assert _progress.stage(ready) == "running"
-    jax.monitoring.record_event_duration_secs("/jax/core/compile/jaxpr_trace_duration", 0.01)
-    k = _progress._EVENTS["ready"] - ready
-    assert _progress.stage(ready) == f"compiling ({k} program{'' if k == 1 else 's'} ready)"
-    assert _progress.stage(_progress._EVENTS["ready"]) == "compiling (0 programs ready)"
-    monkeypatch.delenv("POLYJAX_PROGRESS", raising=False)
-    term = _Terminal()
-    with _progress.progress_line("fitting ward", after=0.0, interval=0.05, stream=term):
-        jax.monitoring.record_event_duration_secs("/jax/core/compile/backend_compile_duration", 0.01)
-        time.sleep(0.2)  # the line is written at once (after=0): a moment for its thread to start
-    assert "\rpolyjax: fitting ward: 0 s, running\033[K" in term.text
-    assert _progress.stage(ready) == "running"
-
-
+# ---------------------------------------------------------------- 17: cache info|clear, a size cap (the progress line:
+# tests/test_latency.py::test_compile_notice_and_progress_line_say_what_is_happening)
 def test_cache_info_and_clear_commands(capsys, tmp_path):
     folder = tmp_path / "cache"
     (folder / "polyjax-programs").mkdir(parents=True)
@@ -452,21 +387,28 @@ def test_cache_folder_is_trimmed_to_its_cap_after_a_run_oldest_first(capsys, tmp
 
 # ---------------------------------------------------------------- 1: every export target for a baseline fit
 def test_export_baseline_fit_to_glsl_and_brdf_explorer_by_a_table(capsys, tmp_path, saved_fits):
+    import re
     import shutil
     import subprocess
-
-    from polyjax.export._glsl_table import RESOLUTION, tabulated_numpy
 
     for target, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf")):
         out = tmp_path / f"ward{suffix}"
         assert main(["export", str(saved_fits[1]), "--to", target, "--index", "1", "--out", str(out)]) == 0
         assert "tabulated BRDF" in out.read_text()
+    # the shader's table: max(f, 0) per channel at the nodes of a coarse MERL grid (file order), then 1 where both
+    # directions of the node are above the horizon
+    text = (tmp_path / "ward.glsl").read_text()
+    resolution = tuple(int(re.search(rf"const int {n} = (\d+);", text).group(1)) for n in ("NH", "ND", "NP"))
+    numbers = re.search(r"const float TABLE\[(\d+)\] = float\[\d+\]\(([^)]*)\);", text)
+    table = np.array([float(x) for x in numbers.group(2).split(",")]).reshape(4, -1)
+    assert int(numbers.group(1)) == table.size == 4 * int(np.prod(resolution))
     ward = pj.load_model(saved_fits[1])[1]
-    u, v, _, above = pj.data.merl_grid(RESOLUTION)  # the table's nodes: the interpolation returns the model there
-    u, v = np.asarray(u)[above][::7], np.asarray(v)[above][::7]
-    got = tabulated_numpy(ward)(u, v)
-    want = np.maximum(np.asarray(ward(u, v)), 0.0)[:, None]
-    np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=1e-6, atol=1e-9)
+    u, v, _, above = pj.data.merl_grid(resolution)
+    np.testing.assert_array_equal(table[3], above.astype(float))
+    want = np.maximum(np.asarray(ward(np.asarray(u)[above], np.asarray(v)[above])), 0.0)
+    assert want.max() > 10 * want.min() >= 0  # a lobe: the table is not a constant
+    np.testing.assert_allclose(table[:3, above], np.broadcast_to(want, (3, want.size)), rtol=1e-6, atol=1e-9)
+    assert np.all(table[:3, ~above] == 0.0)
     if shutil.which("glslangValidator"):
         frag = tmp_path / "ward.frag"
         frag.write_text("#version 120\n" + (tmp_path / "ward.glsl").read_text()

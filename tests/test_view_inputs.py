@@ -78,9 +78,19 @@ def _page_data(path):
     return json.loads(re.search(r'id="polyjax-data">(.*?)</script>', path.read_text(), re.S).group(1))
 
 
-def test_capture_samples_photographs_and_relit_fit(browser, capture, tmp_path):  # noqa: F811
-    from polyjax.cli._photos import errors_of
+def _errors(predicted, capture):
+    """Per light ``(relative RMS, PSNR in dB)`` of ``predicted (L, H, W, 3)`` against the capture's photographs and
+    the relative RMS of all lights together, over the mask's pixels with no saturated channel (PSNR's peak: the
+    camera's white, ``capture.saturation``): the errors ``polyjax relight`` prints (docs/photometric.md)."""
+    images = np.asarray(capture.images, np.float64)
+    keep = np.asarray(capture.mask)[None] & np.all(images < capture.saturation, axis=-1)
+    diff2 = [np.sum((np.asarray(p)[k] - i[k]) ** 2) for p, i, k in zip(predicted, images, keep)]
+    rows = [(float(np.sqrt(d2 / np.sum(i[k] ** 2))), float(10 * np.log10(capture.saturation**2 / (d2 / (3 * k.sum())))))
+            for d2, i, k in zip(diff2, images, keep)]
+    return rows, float(np.sqrt(sum(diff2) / np.sum(images[keep] ** 2)))
 
+
+def test_capture_samples_photographs_and_relit_fit(browser, capture, tmp_path):  # noqa: F811
     folder, loaded, fit = capture
     path = pj.view.write_page([("fit", fit), str(folder)], tmp_path / "capture.html",
                               settings=pj.view.ViewSettings(size=48))
@@ -103,7 +113,7 @@ def test_capture_samples_photographs_and_relit_fit(browser, capture, tmp_path): 
     relit = np.asarray(pj.relight(fit, shown))
     mask = np.asarray(shown.mask)
     np.testing.assert_allclose(np.asarray(photos["predicted"]).reshape(-1, 3), relit[0][mask], rtol=1e-4, atol=1e-6)
-    rows, total = errors_of(relit, shown)
+    rows, total = _errors(relit, shown)
     print(f"page vs polyjax relight: relative RMS {photos['relative_rms_all']:.6f} vs {total:.6f}")
     assert 0.01 < total < 0.5  # an imperfect fit: the comparison means something
     np.testing.assert_allclose(photos["relative_rms"], [r for r, _ in rows], rtol=1e-4)

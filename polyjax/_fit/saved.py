@@ -10,7 +10,7 @@ key loads the executable and runs it.
 
 The program takes the inputs traced, so it is the fit a ``jit``-ted call of :func:`polyjax.fit_polynomial` gives
 (the dense path, with the same numbers as an eager call for data below the streaming size). It is used only where
-that is the eager call's result too: data below :data:`polyjax._fit.stream.STREAM_ROWS` samples, finite values and
+that is the eager call's result too: data below :func:`polyjax._fit.stream.stream_threshold` samples, finite values and
 directions (an eager call raises on NaN where a traced one flags the lane). Options the fit refuses return None
 before any work (the ordinary call then raises its error); anything unexpected while saving or loading (a stale or
 unreadable file, a program that does not serialise) is logged once per file with its reason (logger ``polyjax``,
@@ -37,7 +37,7 @@ from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from .closed_form import check_fit_options
 from .polynomial import fit_polynomial
-from .stream import STREAM_ROWS
+from .stream import stream_threshold
 
 #: subfolder of the compilation cache folder holding the serialised fits
 FOLDER = "polyjax-programs"
@@ -50,7 +50,7 @@ _LOGGED: set[tuple[str, str]] = set()
 
 
 def _usable(data) -> bool:
-    if data.n_samples >= STREAM_ROWS:  # an eager call streams these: not the program below
+    if data.n_samples >= stream_threshold():  # an eager call streams these: not the program below
         return False
     return all(bool(np.all(np.isfinite(np.asarray(a)))) for a in (data.u, data.v, data.values, data.weights))
 

@@ -46,18 +46,24 @@ concrete inputs (a call outside ``jit``/``grad``/``vmap``); traced inputs take t
 
 from __future__ import annotations
 
+import os
+
 import jax
 import jax.numpy as jnp
 
 from .._basis import exponents
 from .._design import range_scaling
+from .._errors import InputError
 from .._pca import pca_from_covariance
 from .._solve.linalg import cholesky_upper, svd
 from .._solve.lstsq import _solve_svd
 
 #: shared-design fits with at least this many samples (and 8 times more than columns plus right-hand sides)
-#: are streamed
+#: are streamed, unless :data:`STREAM_ROWS_ENV` says otherwise (:func:`stream_threshold`)
 STREAM_ROWS = 100_000
+#: environment variable: the number of samples from which a shared design is streamed (default
+#: :data:`STREAM_ROWS`); a machine short of memory streams from fewer, a large number never streams
+STREAM_ROWS_ENV = "POLYJAX_STREAM_ROWS"
 #: rows per block: the block's design (``m x BLOCK``) and its products stay in the CPU's cache (a core's 1 MB
 #: level-2 cache on the machine measured: 4096 rows made the rows' and the values' passes 10-30% faster than 8192)
 BLOCK = 4096
@@ -76,9 +82,25 @@ SNE_CONDITION = 30.0
 CANCELLATION = 1e-3
 
 
+def stream_threshold() -> int:
+    """The number of samples from which a shared design is streamed: ``$POLYJAX_STREAM_ROWS``, read at every fit,
+    else :data:`STREAM_ROWS`.
+
+    Raises:
+        InputError: the variable is set but is not a positive integer.
+    """
+    text = os.environ.get(STREAM_ROWS_ENV, "").strip()
+    if not text:
+        return STREAM_ROWS
+    if not text.isdigit() or int(text) < 1:
+        raise InputError(f"${STREAM_ROWS_ENV}: expected a positive number of samples, found {text!r}")
+    return int(text)
+
+
 def use_stream(n: int, m: int, r: int, method: str, shared: bool, concrete: bool) -> bool:
-    """Whether :func:`polyjax.fit_polynomial` streams (see the module docstring)."""
-    return method == "qr" and shared and concrete and n >= STREAM_ROWS and n >= 8 * (m + r)
+    """Whether :func:`polyjax.fit_polynomial` streams (see the module docstring): concrete inputs, ``method="qr"``,
+    a shared design of at least :func:`stream_threshold` samples and 8 times more than columns plus right-hand sides."""
+    return method == "qr" and shared and concrete and n >= 8 * (m + r) and n >= stream_threshold()
 
 
 def _stream_sum(fn, n: int, block: int, arrays, axes):

@@ -9,7 +9,9 @@ Scenes can be built inside ``jit``/``grad``; renders differentiate with respect 
 lights and environment texels (:mod:`polyjax.render._integrator`). :func:`light_samples` writes a
 render as a linear function of one object's BRDF (behind ``polyjax.fit_polynomial_to_images``);
 :func:`render_mitsuba` renders the same scene with Mitsuba 3 (optional, ``docs/conventions.md``). Every BRDF can be
-importance-sampled (:func:`importance_sampler`).
+importance-sampled (:func:`importance_sampler`), on the area-preserving map of the unit square to the hemisphere
+whose square its tables cover (:func:`square_to_hemisphere`, :func:`hemisphere_to_square`; :func:`cosine_sample` draws
+cosine-weighted directions on it).
 
 Typical use::
 
@@ -25,7 +27,7 @@ from ._image import difference_images, mosaic, read_exr, to_srgb, write_exr, wri
 from ._integrator import RenderResult, cast_floats, render
 from ._linear import LightSamples, light_samples, render_linear
 from ._mitsuba import RoughPlastic, mitsuba_bsdf_eval, mitsuba_roughplastic, mitsuba_scene_dict, render_mitsuba
-from ._sampling import ImportanceSampler, importance_sampler
+from ._sampling import ImportanceSampler, cosine_sample, hemisphere_to_square, importance_sampler, square_to_hemisphere
 from ._scene import Camera, DirectionalLight, Effects, NormalMap, Plane, PointLight, Scene, Sphere, plan_effects
 
 __all__ = [
@@ -36,6 +38,7 @@ __all__ = [
     "plan_effects", "pool_indices", "procedural_sky", "read_exr", "render", "render_grid", "render_linear",
     "render_mitsuba", "rgb_brdf", "sample_pool", "sphere_scene", "to_srgb", "write_exr", "write_png",
     "ImportanceSampler", "importance_sampler", "NormalMap",
+    "cosine_sample", "hemisphere_to_square", "square_to_hemisphere",
 ]
 
 
