@@ -55,7 +55,7 @@ COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimizat
 _FIELDS = tuple(f.name for f in dataclasses.fields(BaselineFit) if not f.metadata.get("static", False))
 _STAMP: list[str] = []
 _REPORTED: set[str] = set()
-#: the executables loaded or compiled in this process, by file name (the last :data:`_KEEP`)
+#: the executables loaded or compiled in this process, by file path (the last :data:`_KEEP`)
 _LOADED: dict[str, tuple] = {}
 _KEEP = 16
 
@@ -201,10 +201,10 @@ def fit_saved(fit, name: str, u, v, values, weights, mask, starts, key, throw: b
         return None
     arrays = arrays + (key,)
     path = _path(folder, name, arrays, options)
-    got = _LOADED.get(path.name) or _load(path) or _compile(fit, name, options, arrays, path)
+    got = _LOADED.get(str(path)) or _load(path) or _compile(fit, name, options, arrays, path)
     if got is None:
         return None
-    _LOADED[path.name] = got
+    _LOADED[str(path)] = got
     while len(_LOADED) > _KEEP:
         del _LOADED[next(iter(_LOADED))]
     compiled, backend = got
