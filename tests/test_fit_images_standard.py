@@ -46,7 +46,7 @@ def test_gltf_sphere_recovered(lights):
     images = _images(TRUE, lights)
     fit = bl.fit_to_images("gltf-pbr", _scenes(pr.Lambertian(), lights), images, n_starts=4)
     assert fit.params.shape == (3, 3) and fit.l2.shape == (3,) and fit.status.shape == (3,)
-    assert np.all(np.asarray(fit.status) == pj.Result.OK), fit.status
+    assert np.all(np.asarray(fit.status) == pj.RESULTS.OK), fit.status
     np.testing.assert_allclose(np.asarray(fit.params), TRUE, atol=1e-6)
     np.testing.assert_array_equal(np.asarray(fit.params[:, 1:]), np.asarray(fit.params[:1, 1:]).repeat(3, 0))
     assert float(jnp.max(fit.l2)) < 1e-8

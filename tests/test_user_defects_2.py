@@ -266,7 +266,7 @@ def test_svbrdf_warns_when_texel_fits_are_not_ok(capsys, tmp_path, monkeypatch):
     def one_not_ok(*args, **kwargs):
         model = fit_rows(*args, **kwargs)
         status = np.array(model.status)
-        status[1, 0, 2] = pj.Result.RANK_DEFICIENT
+        status[1, 0, 2] = pj.RESULTS.RANK_DEFICIENT
         return eqx.tree_at(lambda m: m.status, model, jax.device_put(status, model.status.sharding))
 
     monkeypatch.setattr(svbrdf, "fit_rows_distributed", one_not_ok)
