@@ -23,9 +23,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
 
 from polyjax import RESULTS
 
@@ -223,23 +221,6 @@ def residual_fn(model, u, v):
         return jnp.where(sw > 0, sw * (y - f), 0.0)
 
     return fn
-
-
-def optimistix_solve(fn, raw0, args, max_steps, rtol, atol):
-    # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
-    sol = optx.least_squares(fn, solver, raw0, args=args, max_steps=max_steps, throw=False)
-    r = optx.RESULTS
-    max_steps_hit = (sol.result == r.max_steps_reached) | (sol.result == r.nonlinear_max_steps_reached)
-    code = jnp.where(
-        sol.result == r.successful,
-        RESULTS.OK,
-        jnp.where(
-            max_steps_hit, RESULTS.MAX_STEPS,
-            jnp.where(sol.result == r.nonfinite, RESULTS.NONFINITE, RESULTS.FAILED),
-        ),
-    )
-    return sol.value, code.astype(jnp.int32), sol.stats["num_steps"].astype(jnp.int32)
 
 
 def residuals(name: str, raw, u, v, values, weights_c2):

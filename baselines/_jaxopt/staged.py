@@ -12,15 +12,36 @@ import warnings
 
 import jax
 import jax.numpy as jnp
+import lineax as lx
+import optimistix as optx
 
 from polyjax import RESULTS
 
 from .._models.registry import get_model
-from .._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, optimistix_solve, prepare_lanes, residual_fn
+from .._multistart import _LIMIT_ROUNDS, _LIMIT_TOLS, _at, _pick, finish, prepare_lanes, residual_fn
 
 with warnings.catch_warnings():  # jaxopt warns on import that it is unmaintained: it is the alternative backend named
     warnings.filterwarnings("ignore", message="JAXopt is no longer maintained", category=DeprecationWarning)
     import jaxopt
+
+
+def optimistix_solve(fn, raw0, args, max_steps, rtol, atol):
+    """``optimistix.least_squares`` run to ``max_steps`` on one start: the staged kernel's solve with
+    ``backend="optimistix"`` (the default backend runs :func:`baselines._lm.lm_solve` in one loop instead)."""
+    # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    sol = optx.least_squares(fn, solver, raw0, args=args, max_steps=max_steps, throw=False)
+    r = optx.RESULTS
+    max_steps_hit = (sol.result == r.max_steps_reached) | (sol.result == r.nonlinear_max_steps_reached)
+    code = jnp.where(
+        sol.result == r.successful,
+        RESULTS.OK,
+        jnp.where(
+            max_steps_hit, RESULTS.MAX_STEPS,
+            jnp.where(sol.result == r.nonfinite, RESULTS.NONFINITE, RESULTS.FAILED),
+        ),
+    )
+    return sol.value, code.astype(jnp.int32), sol.stats["num_steps"].astype(jnp.int32)
 
 
 def _jaxopt_solve(fn, raw0, args, max_steps, rtol, atol):
