@@ -171,3 +171,40 @@ def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, geometry, 
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(np.asarray(getattr(shared, field)), np.asarray(getattr(per_solve, field)))
     assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, **kw).l2))
+
+
+@pytest.fixture(scope="module")
+def tall_geometry():
+    """120,000 samples: enough for a concrete fit to take the lanes' passes of polyjax._fit.lanes."""
+    return tuple(jnp.asarray(a) for a in synthetic_geometry(120_000, seed=7))
+
+
+def _tall_lanes(u, v, kind):
+    """Three lanes whose Gauss-Newton weights differ by large factors: ``"alike"`` (a sharp lobe, a constant, a dim
+    broad lobe: one preconditioner serves them all) or ``"opposed"`` (a sharp lobe, its complement, a constant: the
+    lanes' own preconditioners are needed, a second pass per solve)."""
+    h = pj.half_vector(u, v)
+    t2 = 1.0 / h[:, 2] ** 2 - 1.0
+    if kind == "alike":
+        lobe = _lobe(u, v)
+        return jnp.stack([lobe, jnp.full_like(lobe, 0.2), 0.002 * jnp.exp(-t2 / 0.3) + 1e-4])
+    lobe = 3.0 * jnp.exp(-t2 / 0.01) + 1e-3
+    return jnp.stack([lobe, 3.0 * (1.0 - jnp.exp(-t2 / 0.01)) * jnp.exp(-5.0 * t2) + 1e-3, jnp.full_like(lobe, 0.2)])
+
+
+@pytest.mark.parametrize("kind", ["alike", "opposed"])
+def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind):
+    """A concrete tall fit (one preconditioner for every lane and solve, one pass over the held rows per solve) is the
+    traced fit's (the design held whole, each lane's solve a QR of its weighted design) to rounding."""
+    u, v = tall_geometry
+    b = _tall_lanes(u, v, kind)
+    kw = dict(variables="rusinkiewicz", degree=4, interactions=True, cutoff_deg=70.0)
+    fast = pj.fit_log_polynomial(u, v, b, **kw)
+    dense = jax.jit(lambda y: pj.fit_log_polynomial(u, v, y, **kw))(b)
+    c = np.asarray(dense.coefficients)
+    np.testing.assert_allclose(np.asarray(fast.coefficients), c, rtol=0, atol=1e-11 * np.abs(c).max())
+    np.testing.assert_allclose(np.asarray(fast.l2), np.asarray(dense.l2), rtol=1e-11, atol=1e-14)  # 0.2: 1e-16
+    for field in ("rank", "status", "n_used", "mean", "rotation", "centre", "halfwidth"):
+        np.testing.assert_allclose(np.asarray(getattr(fast, field)), np.asarray(getattr(dense, field)), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(fast.condition), np.asarray(dense.condition), rtol=1e-8)
+    assert np.all(np.asarray(fast.status) == 0)
