@@ -61,7 +61,7 @@ from .._errors import InputError
 from .._inputs import check_parameter_count, prepare_inputs
 from .._measurements import Measurements
 from .._metrics import fit_weights, l2_error, l2_from_weights
-from .._model import PolynomialBRDF
+from .._model import PolynomialBRDF, check_clamp, with_clamp
 from .._solve.lstsq import weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
@@ -94,6 +94,7 @@ def fit_log_polynomial(
     method: str = "qr",
     rcond: float | None = None,
     rank_deficient: str = "flag",
+    clamp: bool = False,
 ) -> PolynomialBRDF:
     """Fit ``f = exp(P) - eps`` to minimise equation (11) by ``1 + steps`` weighted linear solves (module docs).
 
@@ -112,6 +113,7 @@ def fit_log_polynomial(
         start_power: ``q`` of the log-space start's weights ``(b + eps)^q`` (module docs).
         weights, mask, cutoff_deg, basis, method, rcond, rank_deficient: as :func:`polyjax.fit_polynomial`.
         interactions: the full response surface of equation (2) (default), or equation (3) with False.
+        clamp: as :func:`polyjax.fit_polynomial` (the model's components clamped to the fitted box when evaluated).
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with ``link="log"`` and ``eps``; its ``l2`` is equation (11) of
@@ -121,12 +123,13 @@ def fit_log_polynomial(
     """
     u, v, values, w, mask, variables, eps, shared = _check_inputs(u, v, values, variables, degree, eps, steps,
                                                                   weights, mask)
+    clamp = check_clamp(clamp, basis)
     opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
             "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
     gn = dict(eps=eps, steps=int(steps), floor=float(floor), start_power=float(start_power))
     if shared or _same_samples(u, v, w, mask, cutoff_deg):
-        return _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
-    return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
+        return with_clamp(_shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn), clamp)
+    return with_clamp(_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn), clamp)
 
 
 def _check_inputs(u, v, values, variables, degree, eps, steps, weights, mask):

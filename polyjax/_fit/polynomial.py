@@ -9,7 +9,7 @@ from jaxtyping import ArrayLike
 
 from .._basis import n_terms
 from .._errors import InputError
-from .._model import PolynomialBRDF
+from .._model import PolynomialBRDF, check_clamp, with_clamp
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from .closed_form import LANE_BLOCK, fit_closed_form
@@ -38,6 +38,7 @@ def fit_polynomial(
     link: str = "identity",
     eps: float = 1e-3,
     steps: int = 3,
+    clamp: bool = False,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form. (Over 80 lines because
     this docstring documents every argument; the body dispatches on the link: the closed form,
@@ -91,6 +92,9 @@ def fit_polynomial(
         link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
            weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
            is equation (3) itself.
+        clamp: the model evaluates its polynomial at the scaled components clamped to the fitted box (a constant
+           extension outside the fitted samples' range, :attr:`polyjax.PolynomialBRDF.clamp`); the fit itself is
+           the same. Legendre basis only.
 
     Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
     e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
@@ -100,15 +104,17 @@ def fit_polynomial(
         :class:`polyjax.PolynomialBRDF` with batch shape ``values.shape[:-1]`` (preceded by the
         degree axis when ``degree`` is a sequence); ``status`` holds :class:`polyjax.RESULTS` codes.
     """
+    clamp = check_clamp(clamp, basis)
     if link != "identity":  # log-space model f = exp(poly) - eps: polyjax/_fit/log.py
         if link != "log" or nonfinite != "error":
             raise InputError(f"link: expected 'identity' or 'log' (with nonfinite='error'), found {link!r}")
         return fit_log_polynomial(u, v, values, variables, degree, eps=eps, steps=steps, weights=weights, mask=mask,
                                   cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
-                                  rcond=rcond, rank_deficient=rank_deficient)
-    return fit_closed_form(u, v, values, variables, degree, weights=weights, mask=mask, cutoff_deg=cutoff_deg,
-                           basis=basis, interactions=interactions, method=method, rcond=rcond,
-                           rank_deficient=rank_deficient, nonfinite=nonfinite, throw=throw, lane_block=lane_block)
+                                  rcond=rcond, rank_deficient=rank_deficient, clamp=clamp)
+    return with_clamp(fit_closed_form(u, v, values, variables, degree, weights=weights, mask=mask,
+                                      cutoff_deg=cutoff_deg, basis=basis, interactions=interactions, method=method,
+                                      rcond=rcond, rank_deficient=rank_deficient, nonfinite=nonfinite, throw=throw,
+                                      lane_block=lane_block), clamp)
 
 
 def n_parameters(variables: str, degree: int, interactions: bool = False) -> int:

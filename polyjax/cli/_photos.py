@@ -23,7 +23,7 @@ from ..render._image import write_exr, write_png
 
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``)
 DEFAULTS = dict(variables="rusinkiewicz", degree=8, interactions=True, link="identity", weighting="brdf",
-                robust_steps=0, cutoff=90.0)
+                robust_steps=0, cutoff=90.0, clamp=True)
 
 
 def parse_lights(text: str | None):
@@ -64,9 +64,12 @@ def add_photo_parsers(subparsers, parents=()) -> None:
     f.add_argument("--robust-steps", type=int, default=DEFAULTS["robust_steps"],
                    help="Tukey-reweighted solves after the first (default 0: plain least squares)")
     f.add_argument("--cutoff", type=float, default=DEFAULTS["cutoff"], help="grazing cutoff in degrees (default 90)")
+    f.add_argument("--no-clamp", dest="clamp", action="store_false",
+                   help="evaluate the polynomial itself outside the fitted lights' range (default: clamped to the "
+                   "fitted box, so the model stays bounded under lights unlike the fitted ones)")
     f.add_argument("--save", required=True, help="the model file to write (.npz or .json)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
-    f.set_defaults(func=run_fit_photos, interactions=DEFAULTS["interactions"])
+    f.set_defaults(func=run_fit_photos, interactions=DEFAULTS["interactions"], clamp=DEFAULTS["clamp"])
     r = subparsers.add_parser(
         "relight", parents=list(parents), help="predict a capture's photographs with a fitted model",
         description="Render a fitted model under the lights of a capture in DiLiGenT's layout; write the predicted "
@@ -106,20 +109,22 @@ def run_fit_photos(args) -> int:
     model = pj.fit_polynomial_to_images(
         capture.scenes, capture.images, args.variables, args.degree, saturation=capture.saturation,
         cutoff_deg=None if args.cutoff >= 90 else args.cutoff, interactions=args.interactions, link=args.link,
-        weighting=args.weighting, robust_steps=args.robust_steps)
+        weighting=args.weighting, robust_steps=args.robust_steps, clamp=args.clamp)
     seconds = time.perf_counter() - t0
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     pj.save_model(save, model, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
     out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": args.variables,
            "degree": args.degree, "interactions": bool(args.interactions), "link": args.link,
-           "weighting": args.weighting, "robust_steps": args.robust_steps, "status_rgb": status,
+           "weighting": args.weighting, "robust_steps": args.robust_steps, "clamp": bool(args.clamp),
+           "status_rgb": status,
            "fit_seconds": seconds, "saved": str(save)}
     if args.json:
         print(json.dumps(out))
     else:
         print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {args.variables} "
               f"p={args.degree}{' with interactions' if args.interactions else ''}, link {args.link}, "
-              f"{args.weighting} weighting, {args.robust_steps} robust steps ({seconds:.2f} s)")
+              f"{args.weighting} weighting, {args.robust_steps} robust steps, "
+              f"{'clamped to the fitted box' if args.clamp else 'not clamped'} ({seconds:.2f} s)")
         print(f"  status: {', '.join(status)}; model written to {save}")
     return 0 if all(s == "OK" for s in status) else 1
 
