@@ -208,3 +208,20 @@ def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind):
         np.testing.assert_allclose(np.asarray(getattr(fast, field)), np.asarray(getattr(dense, field)), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(fast.condition), np.asarray(dense.condition), rtol=1e-8)
     assert np.all(np.asarray(fast.status) == 0)
+
+
+def test_log_fit_on_tall_rank_deficient_data_is_the_dense_fit():
+    """120,000 samples at 30 distinct direction pairs and 45 terms: no Cholesky factor exists (the shared one fails,
+    then each lane's own), each lane falls back to the dense solve: rank 30, ``RANK_DEFICIENT``, the traced fit's
+    model to rounding."""
+    u, v = synthetic_geometry(30, seed=1)
+    u, v = np.tile(u, (4000, 1)), np.tile(v, (4000, 1))
+    h = np.asarray(pj.half_vector(jnp.asarray(u), jnp.asarray(v)))
+    b = np.stack([0.2 + np.exp(-(1 / h[:, 2] ** 2 - 1) / 0.1), np.full(len(u), 0.3), 0.1 + 0.5 * h[:, 2]])
+    kw = dict(variables="rusinkiewicz", degree=8, interactions=True, cutoff_deg=None)
+    fast = pj.fit_log_polynomial(u, v, b, **kw)
+    dense = jax.jit(lambda y: pj.fit_log_polynomial(u, v, y, **kw))(jnp.asarray(b))
+    assert np.all(np.asarray(fast.status) == pj.RESULTS.RANK_DEFICIENT) and np.all(np.asarray(fast.rank) == 30)
+    np.testing.assert_array_equal(np.asarray(fast.rank), np.asarray(dense.rank))
+    np.testing.assert_allclose(np.asarray(fast(u[:30], v[:30])), np.asarray(dense(u[:30], v[:30])), rtol=1e-12,
+                               atol=1e-13)
