@@ -40,8 +40,9 @@ solve). The polynomials are linear in their coefficients, so the values at the s
 are ``p + t (p_step - p)``: one product with the rows per solve, none per candidate step. Otherwise (per-lane
 directions, lanes that keep different samples) each solve is a :func:`polyjax.fit_polynomial` call
 (:func:`_gauss_newton`). On the DiLiGenT ball (352,745 BRDF samples, 3 channels, Rusinkiewicz ``p = 8`` with
-interactions) the shared program is the per-solve calls' result to 3e-14 (coefficients), and the lanes' passes
-make it about five times faster than one streamed factorisation per lane and solve (``benchmarks/RESULTS.md``).
+interactions) the shared program is the per-solve calls' result to 1e-14 of the largest coefficient (both split
+directions), and the lanes' passes make it about four times faster than one streamed factorisation per lane and
+solve (``benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations
