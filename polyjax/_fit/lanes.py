@@ -72,6 +72,8 @@ class Rows:
     """The design's rows as the passes read them (made by :func:`lane_rows`).
 
     Attributes:
+        spec, n, block: ``(max_degree, basis, interactions)``, the number of samples, rows per block.
+        held: whether ``P`` is held (:data:`HOLD_BYTES`).
         source: the preconditioned rows ``P = (E_1 R_1)^{-T} D^T`` ``(m, n)`` when :attr:`held`, else the scaled
             components ``t (k, n)`` the rows are rebuilt from, block by block.
         scale, r1, ok: the shared preconditioner ``E_1 (m,)``, ``R_1 (m, m)`` and whether its factor succeeded.
