@@ -102,6 +102,12 @@ def l2_error(
 def _l2_core(values, predicted, u, v, weights, mask, *, cutoff_deg):
     """Equation (11) in one compiled program (op by op it was about twenty, each lowered anew in every process)."""
     w, wc2 = fit_weights(u, v, weights, mask, cutoff_deg)
+    return l2_from_weights(values, predicted, w, wc2)
+
+
+def l2_from_weights(values, predicted, w, wc2):
+    """Equation (11) given the weights ``(w, w cos^2 theta_u)`` of :func:`fit_weights` (a fit that scores many
+    predictions of the same samples makes them once): :func:`l2_error`'s arithmetic."""
     r = jnp.where(wc2 > 0, values - predicted, 0.0)
     num = jnp.sum(wc2 * r * r, axis=-1)
     den = jnp.sum(jnp.broadcast_to(w, jnp.broadcast_shapes(w.shape, r.shape)), axis=-1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Sequence
 
@@ -22,7 +23,7 @@ from ._variables import get_variables
 #: the links of a polynomial model: equation (3) itself, or ``f = exp(P) - eps`` (:mod:`polyjax._fit.log`)
 LINKS = ("identity", "log")
 #: the fields of :class:`PolynomialSpec`, in order: the model's definition wherever it is given by keyword
-SPEC_FIELDS = ("variables", "degree", "basis", "interactions", "link", "eps")
+SPEC_FIELDS = ("variables", "degree", "basis", "interactions", "link", "eps", "clamp")
 
 
 class PolynomialSpec(eqx.Module):
@@ -34,7 +35,7 @@ class PolynomialSpec(eqx.Module):
     names a model: the fitters (``spec=`` of :func:`polyjax.fit_polynomial`, :func:`polyjax.fit_log_polynomial`,
     :func:`polyjax.fit_polynomial_to_images`, equal to their keyword arguments of the same names), a fitted model
     (:attr:`PolynomialBRDF.spec`), a saved model (the same fields, by name, in the file's header: ``docs/formats.md``)
-    and the command line (``--variables --degree --basis --interactions --link --eps``).
+    and the command line (``--variables --degree --basis --interactions --link --eps --clamp``).
 
     Attributes:
         variables: a registered variable set (stored by its canonical name: ``"as"`` becomes
@@ -44,6 +45,8 @@ class PolynomialSpec(eqx.Module):
         interactions: the full response surface of equation (2) instead of equation (3).
         link: ``"identity"`` or ``"log"``.
         eps: the log link's offset in 1/sr (``f >= -eps``); unused by the identity link.
+        clamp: evaluate the polynomial at its scaled components clamped to the fitted box (a constant extension
+            outside the fitted samples' range: :attr:`PolynomialBRDF.clamp`); Legendre basis only.
 
     Raises:
         InputError, UnknownNameError: a field that is not one of the values above, naming the field.
@@ -55,9 +58,10 @@ class PolynomialSpec(eqx.Module):
     interactions: bool = eqx.field(static=True)
     link: str = eqx.field(static=True)
     eps: float = eqx.field(static=True)
+    clamp: bool = eqx.field(static=True)
 
     def __init__(self, variables: str = "lafortune", degree: int | Sequence[int] = 5, basis: str = "legendre",
-                 interactions: bool = False, link: str = "identity", eps: float = 1e-3):
+                 interactions: bool = False, link: str = "identity", eps: float = 1e-3, clamp: bool = False):
         self.variables = get_variables(variables).name
         self.degree = _spec_degree(degree)
         if basis not in BASES:
@@ -73,6 +77,7 @@ class PolynomialSpec(eqx.Module):
                 np.isfinite(eps) and eps > 0):
             raise InputError(f"eps: expected a positive offset in 1/sr, found {eps!r}")
         self.eps = float(eps)
+        self.clamp = check_clamp(clamp, basis)
 
     @property
     def n_parameters(self) -> int | tuple[int, ...]:
@@ -150,6 +155,13 @@ class PolynomialBRDF(eqx.Module):
         variables, basis, interactions, max_degree: static description of the model family.
         link, eps: ``"identity"`` (equation (3) itself, the default) or ``"log"``: the model is then
             ``f = exp(poly) - eps``, the polynomial fitted in log space (:func:`polyjax.fit_log_polynomial`).
+        clamp: evaluate at the scaled components clamped to the fitted box, ``t_j -> min(max(t_j, -1), 1)``
+            (``[-1, 1]`` holds every fitted sample's components): the fitted model inside the box, and outside it
+            the value at the nearest point of the box (a constant extension along each component), so the
+            model stays bounded where no sample constrained it (a degree-8 polynomial grows like ``t^8`` there).
+            False (the default): the polynomial everywhere. Legendre basis only (a monomial model keeps no
+            range). Every evaluator honours it: calls, renders, the GLSL, numpy and Dr.Jit exports (the Mitsuba
+            plugin, the viewer) and MERL tables; it does not change the fit.
     """
 
     coefficients: Float[Array, "*batch m"]
@@ -169,6 +181,12 @@ class PolynomialBRDF(eqx.Module):
     max_degree: int = eqx.field(static=True)
     link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._fit.log)
     eps: float = eqx.field(static=True, default=0.0)
+    clamp: bool = eqx.field(static=True, default=False)  # constant extension outside the fitted box (docs above)
+
+    def __check_init__(self):
+        if not isinstance(self.clamp, bool):  # a static field: hashed, and saved as JSON
+            raise InputError(f"clamp: expected True or False, found {self.clamp!r}")
+        check_clamp(self.clamp, self.basis)
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
@@ -191,7 +209,7 @@ class PolynomialBRDF(eqx.Module):
         """The model's definition (:class:`PolynomialSpec`): its variables, basis, interactions, link (with ``eps``)
         and highest degree ``max_degree`` (a fit of several degrees gives the highest; ``degree`` holds each lane's)."""
         return PolynomialSpec(self.variables, self.max_degree, self.basis, self.interactions, self.link,
-                              self.eps if self.link == "log" else 1e-3)
+                              self.eps if self.link == "log" else 1e-3, self.clamp)
 
     @property
     def ok(self) -> Array:
@@ -210,6 +228,8 @@ class PolynomialBRDF(eqx.Module):
     def _lane(self, params, x: Float[Array, "... k"]) -> Float[Array, "..."]:
         coef, mean, rot, centre, hw = params
         t = ((x - mean) @ rot - centre) / hw
+        if self.clamp:  # the nearest point of the fitted box; on its faces the inside's derivative (not clip's 1/2)
+            t = jnp.where(t > 1.0, 1.0, jnp.where(t < -1.0, -1.0, t))
         return design_matrix(t, self.max_degree, self.basis, self.interactions) @ coef
 
     def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "*batch ..."]:
@@ -220,7 +240,8 @@ class PolynomialBRDF(eqx.Module):
 
         Returns:
             ``(*batch, ...)`` BRDF values; 0 where ``u`` or ``v`` is below the horizon or has no
-            direction. The polynomial itself is not clamped and can be negative.
+            direction. The polynomial's values are not clamped and can be negative (:attr:`clamp` clamps its
+            arguments to the fitted box).
         """
         dtype = self.coefficients.dtype
         u, v = (a if isinstance(a, jax.Array) else np.asarray(a, dtype) for a in (u, v))
@@ -267,6 +288,21 @@ class PolynomialBRDF(eqx.Module):
                 out[b, 1 + j :: k] = in_z[1:]
             out[b, 0] = beta0
         return out.reshape(self.coefficients.shape)
+
+
+def check_clamp(clamp, basis: str) -> bool:
+    """The ``clamp=`` option of a fit checked before any work (:attr:`PolynomialBRDF.clamp`)."""
+    if not isinstance(clamp, (bool, np.bool_)):
+        raise InputError(f"clamp: expected True or False, found {clamp!r}")
+    if clamp and basis != "legendre":
+        raise InputError(f"clamp: only for the Legendre basis (its components are scaled onto [-1, 1] over the "
+                         f"fitted samples), found basis {basis!r}")
+    return bool(clamp)
+
+
+def with_clamp(model: PolynomialBRDF, clamp: bool) -> PolynomialBRDF:
+    """``model`` evaluated with :attr:`PolynomialBRDF.clamp` set to ``clamp`` (the same arrays)."""
+    return model if model.clamp == clamp else dataclasses.replace(model, clamp=bool(clamp))
 
 
 def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:

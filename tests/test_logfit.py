@@ -199,3 +199,57 @@ def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, three_lane
     for field in ("rank", "status", "n_used"):
         np.testing.assert_array_equal(np.asarray(getattr(shared, field)), np.asarray(getattr(per_solve, field)))
     assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, weights=w, **kw).l2))
+
+
+@pytest.fixture(scope="module")
+def tall_geometry():
+    """120,000 samples: enough for a concrete fit to take the lanes' passes of polyjax._fit.lanes."""
+    return tuple(jnp.asarray(a) for a in synthetic_geometry(120_000, seed=7))
+
+
+def _tall_lanes(u, v, kind):
+    """Three lanes whose Gauss-Newton weights differ by large factors: ``"alike"`` (a sharp lobe, a constant, a dim
+    broad lobe: one preconditioner serves them all) or ``"opposed"`` (a sharp lobe, its complement, a constant: the
+    lanes' own preconditioners are needed, a second pass per solve)."""
+    h = pj.half_vector(u, v)
+    t2 = 1.0 / h[:, 2] ** 2 - 1.0
+    if kind == "alike":
+        lobe = _lobe(u, v)
+        return jnp.stack([lobe, jnp.full_like(lobe, 0.2), 0.002 * jnp.exp(-t2 / 0.3) + 1e-4])
+    lobe = 3.0 * jnp.exp(-t2 / 0.01) + 1e-3
+    return jnp.stack([lobe, 3.0 * (1.0 - jnp.exp(-t2 / 0.01)) * jnp.exp(-5.0 * t2) + 1e-3, jnp.full_like(lobe, 0.2)])
+
+
+@pytest.mark.parametrize("kind", ["alike", "opposed"])
+def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind):
+    """A concrete tall fit (one preconditioner for every lane and solve, one pass over the held rows per solve) is the
+    traced fit's (the design held whole, each lane's solve a QR of its weighted design) to rounding."""
+    u, v = tall_geometry
+    b = _tall_lanes(u, v, kind)
+    kw = dict(variables="rusinkiewicz", degree=4, interactions=True, cutoff_deg=70.0)
+    fast = pj.fit_log_polynomial(u, v, b, **kw)
+    dense = jax.jit(lambda y: pj.fit_log_polynomial(u, v, y, **kw))(b)
+    c = np.asarray(dense.coefficients)
+    np.testing.assert_allclose(np.asarray(fast.coefficients), c, rtol=0, atol=1e-11 * np.abs(c).max())
+    np.testing.assert_allclose(np.asarray(fast.l2), np.asarray(dense.l2), rtol=1e-11, atol=1e-14)  # 0.2: 1e-16
+    for field in ("rank", "status", "n_used", "mean", "rotation", "centre", "halfwidth"):
+        np.testing.assert_allclose(np.asarray(getattr(fast, field)), np.asarray(getattr(dense, field)), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(fast.condition), np.asarray(dense.condition), rtol=1e-8)
+    assert np.all(np.asarray(fast.status) == 0)
+
+
+def test_log_fit_on_tall_rank_deficient_data_is_the_dense_fit():
+    """120,000 samples at 30 distinct direction pairs and 45 terms: no Cholesky factor exists (the shared one fails,
+    then each lane's own), each lane falls back to the dense solve: rank 30, ``RANK_DEFICIENT``, the traced fit's
+    model to rounding."""
+    u, v = synthetic_geometry(30, seed=1)
+    u, v = np.tile(u, (4000, 1)), np.tile(v, (4000, 1))
+    h = np.asarray(pj.half_vector(jnp.asarray(u), jnp.asarray(v)))
+    b = np.stack([0.2 + np.exp(-(1 / h[:, 2] ** 2 - 1) / 0.1), np.full(len(u), 0.3), 0.1 + 0.5 * h[:, 2]])
+    kw = dict(variables="rusinkiewicz", degree=8, interactions=True, cutoff_deg=None)
+    fast = pj.fit_log_polynomial(u, v, b, **kw)
+    dense = jax.jit(lambda y: pj.fit_log_polynomial(u, v, y, **kw))(jnp.asarray(b))
+    assert np.all(np.asarray(fast.status) == pj.RESULTS.RANK_DEFICIENT) and np.all(np.asarray(fast.rank) == 30)
+    np.testing.assert_array_equal(np.asarray(fast.rank), np.asarray(dense.rank))
+    np.testing.assert_allclose(np.asarray(fast(u[:30], v[:30])), np.asarray(dense(u[:30], v[:30])), rtol=1e-12,
+                               atol=1e-13)

@@ -153,6 +153,36 @@ def test_log_link_fit_from_images(synthetic):
     assert model.link == "log" and rel < 0.02
 
 
+def test_clamped_fit_from_images_is_bounded_under_lights_outside_the_fitted_range(synthetic):
+    """Fitted under four lights up to 37 degrees from the view, a degree-6 polynomial diverges under lights at 40-45
+    degrees (their ``theta_d`` lies outside the fitted range); with ``clamp`` it predicts them within 10%, and under
+    the fitted lights it is the same model."""
+    _, cap = synthetic
+    fit, out = cap.select([0, 1, 3, 5]), cap.select([2, 4, 6, 7])
+    kw = dict(interactions=True, weighting="brdf", cutoff_deg=None)
+    free = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, **kw)
+    model = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, clamp=True, **kw)
+    assert model.clamp and not free.clamp
+    np.testing.assert_allclose(np.asarray(pj.relight(model, fit)), np.asarray(pj.relight(free, fit)), rtol=1e-12,
+                               atol=1e-15)
+
+    def rel(m):
+        return np.linalg.norm(np.asarray(pj.relight(m, out)) - out.images) / np.linalg.norm(out.images)
+
+    assert rel(free) > 1.0 and rel(model) < 0.15, (rel(free), rel(model))
+
+
+def test_fit_photos_clamps_by_default(synthetic, tmp_path):
+    from polyjax.cli import main
+
+    folder, _ = synthetic
+    for flags, clamp in (([], True), (["--no-clamp"], False)):
+        path = tmp_path / f"m{len(flags)}.json"
+        assert main(["--no-cache", "fit-photos", str(folder), "--variables", "lafortune", "--degree", "2", "--save",
+                     str(path), *flags]) == 0
+        assert pj.load_model(path).clamp is clamp
+
+
 def _break(folder, tmp_path, what):
     bad = tmp_path / "bad"
     shutil.copytree(folder, bad)

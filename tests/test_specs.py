@@ -24,6 +24,7 @@ SPECS = {
     "lafortune p=5": pj.PolynomialSpec("lafortune", 5),
     "ward degrees 1-3, monomial": pj.PolynomialSpec("ward", (1, 2, 3), basis="monomial"),
     "rusinkiewicz p=4 interactions log": pj.PolynomialSpec("rusinkiewicz", 4, interactions=True, link="log", eps=0.01),
+    "ashikhmin-shirley p=6 clamped": pj.PolynomialSpec("as", 6, clamp=True),
 }
 
 
@@ -80,7 +81,7 @@ def test_spec_is_a_static_value_under_jit():
     (dict(variables="nope"), "variables 'nope'"), (dict(degree=-1), "degree: expected"),
     (dict(degree=2.5), "degree: expected"), (dict(basis="chebyshev"), "basis: expected"),
     (dict(interactions="yes"), "interactions: expected"), (dict(link="sqrt"), "link: expected"),
-    (dict(eps=0.0), "eps: expected a positive"),
+    (dict(eps=0.0), "eps: expected a positive"), (dict(basis="monomial", clamp=True), "clamp: only for the Legendre"),
 ])
 def test_bad_spec_fields_are_refused_naming_the_field(fields, message):
     with pytest.raises(pj.PolyjaxError, match=message):
@@ -117,9 +118,9 @@ def test_solver_settings_fit_as_the_keyword_form():
 def test_command_line_model_options_make_the_spec(tmp_path, capsys):
     path = tmp_path / "m.npz"
     assert main(["fit", "--variables", "rusinkiewicz", "--degree", "3", "--interactions", "--link", "log",
-                 "--eps", "0.01", "--save", str(path), "--json"]) == 0
+                 "--eps", "0.01", "--clamp", "--save", str(path), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    spec = pj.PolynomialSpec("rusinkiewicz", 3, interactions=True, link="log", eps=0.01)
+    spec = pj.PolynomialSpec("rusinkiewicz", 3, interactions=True, link="log", eps=0.01, clamp=True)
     assert out["spec"] == spec.to_dict() and pj.load_model(path).spec == spec
     assert main(["fit", "--eps", "0", "--link", "log"]) == 2
     assert "--eps: expected a positive offset" in capsys.readouterr().err

@@ -31,15 +31,18 @@ the same principal components and basis, so the coefficients of different steps 
 
 When every lane (colour channel, material) keeps the same samples (directions ``(n, 3)``, and the same samples
 kept by the weights, mask and cutoff in every lane), the whole sequence of solves runs in one compiled program
-(:func:`_shared_kernel`) on the lanes' one design: the samples' variables and the model's values at the samples are
-made for every lane at once; only the weighted factorisation is made per lane and solve
-(the weights of every solve depend on the lane's values), one lane after the other, each as
-:func:`polyjax.fit_polynomial` makes it: on the design held whole (differentiable), or, for concrete tall inputs,
-streamed a block of rows at a time as ``fit_polynomial`` streams a shared design (:mod:`polyjax._fit.stream`). Otherwise
-(per-lane directions, lanes that keep different samples) each solve is a :func:`polyjax.fit_polynomial` call
+(:func:`_shared_kernel`) on the lanes' one design: the samples' variables and the design's rows are made once; only
+the weighted factorisation is made per lane and solve (the weights of every solve depend on the lane's values). On
+the design held whole (traced inputs: differentiable) each lane's solve is :func:`polyjax.fit_polynomial`'s dense
+one, one lane after the other; for concrete tall inputs the preconditioned rows are made once and every solve is one
+pass over them for all the lanes (:mod:`polyjax._fit.lanes`: CholeskyQR2 with one preconditioner for every lane and
+solve). The polynomials are linear in their coefficients, so the values at the samples of a step of length ``t``
+are ``p + t (p_step - p)``: one product with the rows per solve, none per candidate step. Otherwise (per-lane
+directions, lanes that keep different samples) each solve is a :func:`polyjax.fit_polynomial` call
 (:func:`_gauss_newton`). On the DiLiGenT ball (352,745 BRDF samples, 3 channels, Rusinkiewicz ``p = 8`` with
-interactions) the shared program is the per-solve calls' result to 3e-14 (coefficients) and several times faster
-(``benchmarks/RESULTS.md``).
+interactions) the shared program is the per-solve calls' result to 1e-14 of the largest coefficient (both split
+directions), and the lanes' passes make it about four times faster than one streamed factorisation per lane and
+solve (``benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations
@@ -55,17 +58,19 @@ from jaxtyping import ArrayLike
 from .._arrays import is_concrete, is_traced
 from .._basis import n_terms, term_degrees
 from .._design import fitted_design
+from .._directions import cos_theta, cutoff_mask
 from .._errors import InputError
 from .._inputs import check_parameter_count, prepare_inputs
 from .._measurements import Measurements
-from .._metrics import fit_weights, l2_error
-from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
+from .._metrics import fit_weights, l2_error, l2_from_weights
+from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of, with_clamp
 from .._solve.lstsq import weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from .closed_form import _lane, _raise_on_status, _residual_l2, check_fit_options, fit_closed_form
 from .closed_form import _result_fields as _outputs
-from .stream import BLOCK, _design_t, _scaled_components, _stream_map, stream_geometry, streamed_lane, use_stream
+from .lanes import lane_rows, lanes_geometry, lanes_solve
+from .stream import _scaled_components, use_stream
 
 #: the step lengths tried after every Gauss-Newton solve (0, the current model, is always a candidate)
 STEP_LENGTHS = (1.0, 0.5, 0.25)
@@ -91,6 +96,7 @@ def fit_log_polynomial(
     method: str = "qr",
     rcond: float | None = None,
     rank_deficient: str = "flag",
+    clamp: bool = False,
     spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     """Fit ``f = exp(P) - eps`` to minimise equation (11) by ``1 + steps`` weighted linear solves (module docs).
@@ -110,8 +116,9 @@ def fit_log_polynomial(
         start_power: ``q`` of the log-space start's weights ``(b + eps)^q`` (module docs).
         weights, mask, cutoff_deg, basis, method, rcond, rank_deficient: as :func:`polyjax.fit_polynomial`.
         interactions: the full response surface of equation (2) (default), or equation (3) with False.
+        clamp: as :func:`polyjax.fit_polynomial` (the model's components clamped to the fitted box when evaluated).
         spec: the model's definition as one value (:class:`polyjax.PolynomialSpec` with ``link="log"``), instead
-            of ``variables``, ``degree``, ``basis``, ``interactions`` and ``eps``.
+            of ``variables``, ``degree``, ``basis``, ``interactions``, ``eps`` and ``clamp``.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with ``link="log"`` and ``eps``; its ``l2`` is equation (11) of
@@ -122,18 +129,19 @@ def fit_log_polynomial(
     if isinstance(u, Measurements) and isinstance(v, str):  # fit_log_polynomial(data, "rusinkiewicz")
         u, v, variables = u, None, v
     spec = spec_of("fit_log_polynomial", spec, _SPEC_DEFAULTS, variables=variables, degree=degree, basis=basis,
-                   interactions=interactions, link="log", eps=eps)
+                   interactions=interactions, link="log", eps=eps, clamp=clamp)
     if spec.link != "log":
         raise InputError(f"spec: expected link='log' for fit_log_polynomial, found {spec.link!r}")
-    variables, degree, basis, interactions, eps = spec.variables, spec.degree, spec.basis, spec.interactions, spec.eps
+    variables, degree, basis, interactions, eps, clamp = (spec.variables, spec.degree, spec.basis, spec.interactions,
+                                                          spec.eps, spec.clamp)
     u, v, values, w, mask, variables, eps, shared = _check_inputs(u, v, values, variables, degree, eps, steps,
                                                                   weights, mask)
     opts = {"variables": variables, "degree": int(degree), "mask": mask, "cutoff_deg": cutoff_deg, "basis": basis,
             "interactions": interactions, "method": method, "rcond": rcond, "rank_deficient": rank_deficient}
     gn = dict(eps=eps, steps=int(steps), floor=float(floor), start_power=float(start_power))
     if shared or _same_samples(u, v, w, mask, cutoff_deg):
-        return _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
-    return _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn)
+        return with_clamp(_shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn), clamp)
+    return with_clamp(_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn), clamp)
 
 
 #: the keyword defaults of :func:`fit_log_polynomial` that :class:`polyjax.PolynomialSpec` groups
@@ -242,109 +250,130 @@ def _shared_gauss_newton(u, v, values, w, mask, cutoff_deg, opts, **gn) -> Polyn
     return _raise_on_status(model) if opts["rank_deficient"] == "error" else model
 
 
-def _dense_design(x, keep, active, *, degree, basis, interactions, method, rcond):
-    """The shared design held whole (differentiable): ``(fit, values_at)``, ``fit(y, w, w cos^2)`` one lane's
-    solve as :func:`polyjax.fit_polynomial` makes it (its outputs as ``polyjax._fit._lane``'s, without the degree
-    axis) and ``values_at(coef (B, m))`` the polynomial at every sample, ``(B, n)``."""
+def _dense_design(x, keep, active, first_wc2, *, degree, basis, interactions, method, rcond):
+    """The shared design held whole (differentiable): ``(fit, values_at)``, ``fit(y, w, w cos^2)`` the lanes' solves
+    (``(L, n)`` each), each as :func:`polyjax.fit_polynomial` makes it (its outputs as ``polyjax._fit._lane``'s,
+    without the degree axis, with a lane axis; ``jax.lax.map`` over the lanes: under ``vmap`` a solve's conditionals
+    would run both branches), and ``values_at(coef (L, m))`` the polynomials at every sample, ``(L, n)``
+    (``first_wc2``, the first solve's weights, is not used here)."""
     pca, centre, hw, d = fitted_design(x, keep, degree, basis, interactions)
 
-    def fit(y, wl, wc2l):
+    def fit_lane(y, wl, wc2l):
         sol = weighted_lstsq(d, y[:, None], wc2l, active, method=method, rcond=rcond)
         c = sol.coefficients[:, 0]
         l2 = _residual_l2(d, c, y, wl, wc2l)
         return (pca.mean, pca.rotation, centre, hw), c, l2, sol.rank, sol.condition, sol.n_active, jnp.sum(wl > 0)
 
-    return fit, lambda coef: (d @ coef.T).T
+    return (lambda y, wl, wc2l: jax.lax.map(lambda a: fit_lane(*a), (y, wl, wc2l))), lambda coef: (d @ coef.T).T
 
 
-def _streamed_design(x, keep, active, *, degree, basis, interactions, method, rcond):
-    """:func:`_dense_design` streamed: every solve :func:`polyjax.fit_polynomial`'s streamed fit of one lane
-    (:func:`polyjax._stream.stream_geometry`, :func:`polyjax._stream.streamed_lane`; the dense solve where a
-    Cholesky factor fails), and the polynomial's values made a block of rows at a time, the design never held."""
+def _streamed_design(x, keep, active, first_wc2, *, degree, basis, interactions, method, rcond):
+    """:func:`_dense_design` for concrete tall inputs (:mod:`polyjax._fit.lanes`): the rows made once with one
+    preconditioner for every lane and solve (from the first solve's weights ``first_wc2 (L, n)``), one pass over them
+    per solve for all the lanes (the dense solve for a lane whose Cholesky factor fails, as
+    :func:`polyjax.fit_polynomial` falls back), and the polynomials' values one product with the rows."""
     lane = functools.partial(_lane, active=active[None], max_degree=degree, basis=basis, interactions=interactions,
                              method=method, rcond=rcond)
-    opts = dict(max_degree=degree, basis=basis, interactions=interactions)
+    pca, centre, hw, t = _scaled_components(x, keep, keep, basis)
+    rows = lane_rows(t, degree, basis, interactions, first_wc2, active)
+    tr = (pca.mean, pca.rotation, centre, hw)
 
     def fit(y, wl, wc2l):
-        geo = stream_geometry(x, wl, wc2l, active[None], **opts)
-        out = streamed_lane(geo, y[None], active[None], rcond=rcond, dense=lambda: lane(y[None], wl, wc2l, x), **opts)
-        tr, coef, l2, rank, cond, n_act, n_used = out
-        return tr, coef[0, 0], l2[0, 0], rank[0], cond[0], n_act[0], n_used
+        geo = lanes_geometry(rows, wl, wc2l, y, active)
+        coef, l2, rank, cond, n_act = lanes_solve(geo, rows.n, active, rcond=rcond)
+        lanes = jax.tree.map(lambda a: jnp.broadcast_to(a, y.shape[:1] + a.shape), tr)
+        streamed = (lanes, coef, l2, rank, cond, n_act, geo["n_used"])
 
-    t = _scaled_components(x, keep, keep, basis)[3]
+        def one(args):  # a lane whose factor failed: the dense solve
+            ok, y_l, wl_l, wc2_l, out = args
 
-    def values_at(coef):
-        def block(t_b):
-            return (jnp.matmul(coef, _design_t(t_b.T, degree, basis, interactions), precision="highest"),), ()
+            def dense():
+                tr_d, c, l2_d, rank_d, cond_d, n_act_d, n_used_d = lane(y_l[None], wl_l, wc2_l, x)
+                return tr_d, c[0, 0], l2_d[0, 0], rank_d[0], cond_d[0], n_act_d[0], n_used_d.astype(out[-1].dtype)
 
-        return _stream_map(block, t.shape[1], BLOCK, (t.T,))[0][0]
+            return jax.lax.cond(ok, lambda: out, dense)
 
-    return fit, values_at
+        return jax.lax.cond(jnp.all(geo["ok"]), lambda: streamed,
+                            lambda: jax.lax.map(one, (geo["ok"], y, wl, wc2l, streamed)))
+
+    return fit, rows.values
+
+
+def _start(values, w, wc2, *, eps, floor, start_power):
+    """The log-space start's target and weights (module docs, step 1) and the squared weight floor ``fl2 (B, 1)``."""
+    b = jnp.maximum(values, 0.0) + eps
+    rms = jnp.sqrt(jnp.sum(wc2 * b * b, -1, keepdims=True) / jnp.maximum(jnp.sum(wc2, -1, keepdims=True), 1e-300))
+    fl2 = (floor * rms) ** 2
+    return (jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power)), fl2
 
 
 @functools.partial(jax.jit, static_argnames=("variables", "degree", "basis", "interactions", "method", "rcond",
                                              "cutoff_deg", "eps", "steps", "floor", "start_power", "stream"))
 def _shared_kernel(inp, u, v, w, mask, *, variables, degree, basis, interactions, method, rcond, cutoff_deg, eps,
                    steps, floor, start_power, stream) -> dict:
-    """The solves of :func:`_gauss_newton` on one design shared by the ``B`` lanes of ``inp`` (the same arithmetic:
-    each solve that of :func:`polyjax.fit_polynomial`, lane by lane, ``jax.lax.map``: under ``vmap`` the streamed
-    solve's conditionals would run both branches, its dense fallback included); ``u, v, w (B, n), mask`` as
-    :func:`_gauss_newton` has them;
-    ``stream``: :func:`_streamed_design`, else :func:`_dense_design`. Returns the fields of
+    """The solves of :func:`_gauss_newton` on one design shared by the ``B`` lanes of ``inp`` (each lane's solve as
+    :func:`polyjax.fit_polynomial` makes it); ``u, v, w (B, n), mask`` as :func:`_gauss_newton` has them; ``stream``:
+    :func:`_streamed_design`, else :func:`_dense_design`. The polynomials' values at the samples are carried from
+    solve to solve (one product with the rows per solve: the line search blends them linearly). Returns the fields of
     :class:`polyjax.PolynomialBRDF` as ``(B, ...)`` arrays."""
     values = inp.values
-    keep, wc2 = fit_weights(u, v, w, mask, cutoff_deg)
-    keep = keep > 0  # the fitted samples; the model may overflow elsewhere
+    w_fit, wc2 = fit_weights(u, v, w, mask, cutoff_deg)  # equation (11)'s weights, made once for every score
+    keep = w_fit > 0  # the fitted samples; the model may overflow elsewhere
+    kept = cutoff_mask(inp.u, inp.v, cutoff_deg) & inp.mask  # fit_weights of the solves' weights, made once
+    cos_u = jnp.where(cutoff_mask(inp.u, inp.v, cutoff_deg), cos_theta(inp.u), 0.0)
+
+    def weights(target, wt):  # (w, w cos^2) of a solve: fit_weights' arithmetic, 0 off the fitted samples
+        wl = jnp.where(kept, jnp.where(keep & jnp.isfinite(target) & jnp.isfinite(wt), wt, 0.0), 0.0)
+        return wl, wl * cos_u * cos_u
+
+    start, fl2 = _start(values, w, wc2, eps=eps, floor=floor, start_power=start_power)
     x = get_variables(variables).fn(inp.u, inp.v)
     active = jnp.asarray(term_degrees(x.shape[-1], degree, interactions)) <= degree
     fit, values_at = (_streamed_design if stream else _dense_design)(
-        x, fit_weights(inp.u, inp.v, inp.weights[0], inp.mask[0], cutoff_deg)[0] > 0, active, degree=degree,
-        basis=basis, interactions=interactions, method=method, rcond=rcond)
+        x, fit_weights(inp.u, inp.v, inp.weights[0], inp.mask[0], cutoff_deg)[0] > 0, active, weights(*start)[1],
+        degree=degree, basis=basis, interactions=interactions, method=method, rcond=rcond)
 
     def solve(target, wt):
-        ok = keep & jnp.isfinite(target) & jnp.isfinite(wt)
-        wl, wc2l = fit_weights(inp.u, inp.v, jnp.where(ok, wt, 0.0), inp.mask, cutoff_deg)
-        tr, *fitted = jax.lax.map(lambda a: fit(*a), (jnp.where(ok, target, 0.0), wl, wc2l))
+        tr, *fitted = fit(jnp.where(keep & jnp.isfinite(target) & jnp.isfinite(wt), target, 0.0),
+                          *weights(target, wt))
         out = _outputs(inp, jnp.asarray([degree], jnp.int32), tuple(a[None] for a in tr), *(a[None] for a in fitted))
         return {k: a[0] for k, a in out.items()}
 
-    def predict(coef):  # the model at the samples, 0 off the fitted ones (where it may overflow)
-        p = jnp.where(keep, values_at(coef), 0.0)
-        return jnp.where(keep, jnp.exp(p) - eps, 0.0)
-
-    def score(coef):
-        return l2_error(values, predict(coef), u, v, w, cutoff_deg, mask)
-
-    b = jnp.maximum(values, 0.0) + eps
-    rms = jnp.sqrt(jnp.sum(wc2 * b * b, -1, keepdims=True) / jnp.maximum(jnp.sum(wc2, -1, keepdims=True), 1e-300))
-    fl2 = (floor * rms) ** 2
-    start = (jnp.log(b), w * jnp.maximum(b * b, fl2) ** (0.5 * start_power))
+    def score(p):  # the L2 of equation (11) of the model whose polynomials at the samples are p
+        return l2_from_weights(values, jnp.where(keep, jnp.exp(p) - eps, 0.0), w_fit, wc2)
 
     def solve_step(i, carry):  # i = 0: the log-space start; then the Gauss-Newton steps (one solve, compiled once)
-        model, l2 = carry
-        f = predict(model["coefficients"])
+        model, l2, p = carry
+        f = jnp.where(keep, jnp.exp(p) - eps, 0.0)
         g = jnp.maximum(f + eps, jnp.finfo(values.dtype).tiny)
         first = i == 0
         step = solve(jnp.where(first, start[0], jnp.log(g) + (values - f) / g),
                      jnp.where(first, start[1], w * jnp.maximum(g * g, fl2)))
-        return jax.lax.cond(first, lambda: (step, score(step["coefficients"])),
-                            lambda: _line_search(model, step, l2, score))
+        p_step = jnp.where(keep, values_at(step["coefficients"]), 0.0)  # 0 off the fitted samples (may overflow)
+        return jax.lax.cond(first, lambda: (step, score(p_step), p_step),
+                            lambda: _line_search(model, step, l2, p, p_step, score))
 
     blank = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(solve, *start))
-    model, l2 = jax.lax.fori_loop(0, steps + 1, solve_step, (blank, jnp.zeros(values.shape[:1], values.dtype)))
+    carry = (blank, jnp.zeros(values.shape[:1], values.dtype), jnp.zeros(values.shape, values.dtype))
+    model, l2, _ = jax.lax.fori_loop(0, steps + 1, solve_step, carry)
     return dict(model, l2=l2)
 
 
-def _line_search(model: dict, step: dict, l2, score):
-    """Lane-wise the best of ``model`` (L2 ``l2``) and the steps towards ``step`` of :data:`STEP_LENGTHS` by
-    ``score`` (each candidate compared with the best so far, as :func:`_gauss_newton` does): ``(model, l2)``."""
+def _line_search(model: dict, step: dict, l2, p, p_step, score):
+    """Lane-wise the best of ``model`` (L2 ``l2``, polynomials ``p (L, n)`` at the samples) and the steps towards
+    ``step`` (``p_step``) of :data:`STEP_LENGTHS` by ``score`` (each candidate compared with the best so far, as
+    :func:`_gauss_newton` does): ``(model, l2, p)``. The polynomials are linear in the coefficients, so a
+    candidate's are ``p + t (p_step - p)``: no pass over the rows per candidate."""
     for t in STEP_LENGTHS:
         cand = dict(step, coefficients=model["coefficients"] + t * (step["coefficients"] - model["coefficients"]))
-        l2_c = score(cand["coefficients"])
+        p_c = p + t * (p_step - p)
+        l2_c = score(p_c)
         better = l2_c < l2
         model = _select(better, cand, model)
+        p = _select(better, p_c, p)
         l2 = jnp.where(better, l2_c, l2)
-    return model, l2
+    return model, l2, p
+
 
 def _as_log(model: PolynomialBRDF, eps: float) -> PolynomialBRDF:
     return PolynomialBRDF(**{k: getattr(model, k) for k in _FIELDS}, variables=model.variables, basis=model.basis,

@@ -11,7 +11,7 @@ from jaxtyping import ArrayLike
 from .._basis import n_terms
 from .._errors import InputError
 from .._measurements import Measurements
-from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
+from .._model import SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of, with_clamp
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
 from .closed_form import LANE_BLOCK, fit_closed_form
@@ -40,6 +40,7 @@ def fit_polynomial(
     link: str = "identity",
     eps: float = 1e-3,
     steps: int = 3,
+    clamp: bool = False,
     spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     r"""Fit the polynomial BRDF of equation (3) by weighted least squares, in closed form. (Over 80 lines because
@@ -94,9 +95,12 @@ def fit_polynomial(
         link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` to equation (11) by ``1 + steps``
            weighted solves (:func:`polyjax.fit_log_polynomial`, one integer ``degree``); ``"identity"`` (default)
            is equation (3) itself.
+        clamp: the model evaluates its polynomial at the scaled components clamped to the fitted box (a constant
+           extension outside the fitted samples' range, :attr:`polyjax.PolynomialBRDF.clamp`); the fit itself is
+           the same. Legendre basis only.
         spec: the model's definition as one value (:class:`polyjax.PolynomialSpec`: ``variables``, ``degree``,
-           ``basis``, ``interactions``, ``link``, ``eps``), instead of those keywords; e.g. a fitted model's
-           ``.spec`` to fit the same family to other data. Keywords that differ from it are refused.
+           ``basis``, ``interactions``, ``link``, ``eps``, ``clamp``), instead of those keywords; e.g. a fitted
+           model's ``.spec`` to fit the same family to other data. Keywords that differ from it are refused.
 
     Inputs sharded over their leading batch axis (a :class:`jax.sharding.NamedSharding` on a device mesh,
     e.g. from :func:`jax.device_put`) are fitted where they are, each device its own lanes
@@ -109,16 +113,16 @@ def fit_polynomial(
     if isinstance(u, Measurements) and isinstance(v, str):  # fit_polynomial(data, "ward", degree=3)
         u, v, variables = u, None, v
     spec = spec_of("fit_polynomial", spec, _SPEC_DEFAULTS, variables=variables, degree=degree, basis=basis,
-                   interactions=interactions, link=link, eps=eps)
+                   interactions=interactions, link=link, eps=eps, clamp=clamp)
     if spec.link == "log":  # log-space model f = exp(poly) - eps: polyjax/_fit/log.py
         if nonfinite != "error":
             raise InputError(f"nonfinite: the log link takes 'error' only (mask bad samples), found {nonfinite!r}")
         return fit_log_polynomial(u, v, values, spec=spec, steps=steps, weights=weights, mask=mask,
                                   cutoff_deg=cutoff_deg, method=method, rcond=rcond, rank_deficient=rank_deficient)
-    return fit_closed_form(u, v, values, spec.variables, spec.degree, weights=weights, mask=mask,
-                           cutoff_deg=cutoff_deg, basis=spec.basis, interactions=spec.interactions, method=method,
-                           rcond=rcond, rank_deficient=rank_deficient, nonfinite=nonfinite, throw=throw,
-                           lane_block=lane_block)
+    return with_clamp(fit_closed_form(u, v, values, spec.variables, spec.degree, weights=weights, mask=mask,
+                                      cutoff_deg=cutoff_deg, basis=spec.basis, interactions=spec.interactions,
+                                      method=method, rcond=rcond, rank_deficient=rank_deficient, nonfinite=nonfinite,
+                                      throw=throw, lane_block=lane_block), spec.clamp)
 
 
 #: the keyword defaults of :func:`fit_polynomial` that :class:`PolynomialSpec` groups

@@ -49,7 +49,8 @@ def add_image_options(p: argparse.ArgumentParser, size_help: str, exposure_help:
 def add_model_options(p: argparse.ArgumentParser, defaults: PolynomialSpec, *, several: bool = False) -> None:
     """The polynomial model's definition on ``p``, with the command's ``defaults``: ``--variables``, ``--degree``
     (``--degrees``; comma-separated degrees when ``several``), ``--basis``, ``--interactions`` /
-    ``--no-interactions``, ``--link``, ``--eps``; :func:`spec_from_args` reads them back."""
+    ``--no-interactions``, ``--link``, ``--eps``, ``--clamp`` / ``--no-clamp``; :func:`spec_from_args` reads them
+    back."""
     degrees = ",".join(map(str, defaults.degree)) if isinstance(defaults.degree, tuple) else str(defaults.degree)
     p.add_argument("--variables", default=defaults.variables,
                    help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES)
@@ -68,6 +69,10 @@ def add_model_options(p: argparse.ArgumentParser, defaults: PolynomialSpec, *, s
                    f"Gauss-Newton solves (default {defaults.link})")
     p.add_argument("--eps", type=float, default=defaults.eps,
                    help=f"the log link's offset in 1/sr (default {defaults.eps:g})")
+    p.add_argument("--clamp", action=argparse.BooleanOptionalAction, default=defaults.clamp,
+                   help="evaluate the polynomial at its components clamped to the fitted samples' box, bounded under "
+                   "directions unlike the fitted ones (Legendre basis; default: "
+                   f"{'clamped' if defaults.clamp else 'not clamped'})")
 
 
 def spec_from_args(args, *, several: bool = False, flag: str = "--degree") -> PolynomialSpec:
@@ -78,7 +83,7 @@ def spec_from_args(args, *, several: bool = False, flag: str = "--degree") -> Po
         raise InputError(f"{flag}: expected one degree for this command, found {args.degree!r}")
     try:
         return PolynomialSpec(args.variables, degrees[0] if len(degrees) == 1 else tuple(degrees), args.basis,
-                              args.interactions, args.link, args.eps)
+                              args.interactions, args.link, args.eps, args.clamp)
     except (InputError, UnknownNameError) as e:
         raise type(e)(f"--{e}") from None
 

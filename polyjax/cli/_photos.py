@@ -22,9 +22,9 @@ from .._errors import InputError
 from ..render._image import write_exr, write_png
 from ._args import add_model_options, spec_from_args
 
-#: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model, then the
-#: fit's other options
-DEFAULT_SPEC = pj.PolynomialSpec("rusinkiewicz", 8, interactions=True)
+#: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model (clamped to
+#: the fitted box, so it stays bounded under lights unlike the fitted ones), then the fit's other options
+DEFAULT_SPEC = pj.PolynomialSpec("rusinkiewicz", 8, interactions=True, clamp=True)
 DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=0, cutoff=90.0)
 
 
@@ -91,15 +91,17 @@ def run_fit_photos(args) -> int:
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     pj.save_model(save, model, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
     out = {"lights": capture.n_lights, "pixels_used": int(np.asarray(model.n_used)[0]), "variables": spec.variables,
-           "degree": spec.degree, "interactions": spec.interactions, "link": spec.link, "spec": spec.to_dict(),
-           "weighting": args.weighting, "robust_steps": args.robust_steps, "status_rgb": status,
+           "degree": spec.degree, "interactions": spec.interactions, "link": spec.link, "clamp": spec.clamp,
+           "spec": spec.to_dict(), "weighting": args.weighting, "robust_steps": args.robust_steps,
+           "status_rgb": status,
            "fit_seconds": seconds, "saved": str(save)}
     if args.json:
         print(json.dumps(out))
     else:
         print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {spec.variables} "
               f"p={spec.degree}{' with interactions' if spec.interactions else ''}, link {spec.link}, "
-              f"{args.weighting} weighting, {args.robust_steps} robust steps ({seconds:.2f} s)")
+              f"{args.weighting} weighting, {args.robust_steps} robust steps, "
+              f"{'clamped to the fitted box' if spec.clamp else 'not clamped'} ({seconds:.2f} s)")
         print(f"  status: {', '.join(status)}; model written to {save}")
     return 0 if all(s == "OK" for s in status) else 1
 

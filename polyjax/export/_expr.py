@@ -11,8 +11,9 @@ the numpy print, evaluated in float64, is what the tests compare with the model;
 the program of a :class:`polyjax.PolynomialBRDF` (paper equation (3), or (2) with
 interactions): normalise ``u`` and ``v``; the explanatory variables ``X`` of its variable set; per channel the
 principal components ``t_j = (sum_i (X_i - mean_i) R_ij - centre_j) / halfwidth_j`` (``t_j = 0`` for an infinite
-half-width); the basis ``B_e = prod_j P_{e_j}(t_j)`` (Legendre by the three-term recurrence, or monomials);
-``f = sum_e beta_e B_e``; 0 unless ``u_z > 0`` and ``v_z > 0``.
+half-width; ``max(min(t_j, 1), -1)`` for a model with ``clamp``); the basis ``B_e = prod_j P_{e_j}(t_j)`` (Legendre
+by the three-term recurrence, or monomials); ``f = sum_e beta_e B_e`` (``exp(f) - eps`` for the log link); 0 unless
+``u_z > 0`` and ``v_z > 0``.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def div(a, b):
 
 
 def call(fn: str, *args):
-    """``fn`` in ``sqrt, max`` (two arguments) or ``exp``."""
+    """``fn`` in ``sqrt``, ``max`` and ``min`` (two arguments) or ``exp``."""
     return ("call", fn, *args)
 
 
@@ -119,9 +120,9 @@ class Program:
             return f"({self._print(e[1], d)} {kind} {self._print(e[2], d)})"
         if kind == "call":
             fn, args = e[1], [self._print(a, d) for a in e[2:]]
-            name = {"glsl": {"sqrt": "sqrt", "max": "max", "exp": "exp"},
-                    "numpy": {"sqrt": "np.sqrt", "max": "np.maximum", "exp": "np.exp"},
-                    "drjit": {"sqrt": "dr.sqrt", "max": "dr.maximum", "exp": "dr.exp"}}[d][fn]
+            name = {"glsl": {"sqrt": "sqrt", "max": "max", "min": "min", "exp": "exp"},
+                    "numpy": {"sqrt": "np.sqrt", "max": "np.maximum", "min": "np.minimum", "exp": "np.exp"},
+                    "drjit": {"sqrt": "dr.sqrt", "max": "dr.maximum", "min": "dr.minimum", "exp": "dr.exp"}}[d][fn]
             return f"{name}({', '.join(args)})"
         if kind == "where":
             a, b, value = (self._print(x, d) for x in e[1:])
@@ -203,7 +204,10 @@ def _channel(prog: Program, model: PolynomialBRDF, lane: int, x):
             ts.append(const(0.0))
             continue
         z = add(*[mul(dx[i], const(rot[i, j])) for i in range(k)])
-        ts.append(prog.assign(div(sub(z, const(centre[j])), const(hw[j]))))
+        t = prog.assign(div(sub(z, const(centre[j])), const(hw[j])))
+        if model.clamp:  # the nearest point of the fitted box
+            t = prog.assign(call("max", call("min", t, const(1.0)), const(-1.0)))
+        ts.append(t)
     powers = []  # powers[j][d] = P_d(t_j) or t_j^d
     for t in ts:
         col = [const(1.0)]
@@ -222,7 +226,10 @@ def _channel(prog: Program, model: PolynomialBRDF, lane: int, x):
             continue
         factors = [powers[j][e[j]] for j in range(k) if e[j] > 0]
         terms.append(mul(const(c), *factors) if factors else const(c))
-    return prog.assign(add(*terms) if terms else const(0.0), prefix="f")
+    f = add(*terms) if terms else const(0.0)
+    if model.link == "log":  # f = exp(poly) - eps
+        f = sub(call("exp", prog.assign(f)), const(model.eps))
+    return prog.assign(f, prefix="f")
 
 
 def neural_program(model) -> Program:

@@ -28,7 +28,7 @@ from .._arrays import is_concrete
 from .._basis import BASES
 from .._design import fitted_design as _design_for
 from .._errors import InputError
-from .._model import RESULTS, SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of
+from .._model import RESULTS, SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_of, with_clamp
 from .._solve.lstsq import METHODS, weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
@@ -58,6 +58,7 @@ def fit_polynomial_to_images(
     steps: int = 3,
     weighting: str = "radiance",
     robust_steps: int = 0,
+    clamp: bool = False,
     spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
@@ -112,8 +113,12 @@ def fit_polynomial_to_images(
             :mod:`polyjax.inverse._samples`).
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
             their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
+        clamp: the model evaluates its polynomial at the scaled components clamped to the box of the fitted
+            pixels' components (:attr:`polyjax.PolynomialBRDF.clamp`): bounded under lights outside the fitted
+            lights' directions, where a high-degree polynomial diverges (``docs/photometric.md``). Legendre basis
+            only; the fit is the same.
         spec: the model's definition as one value (:class:`polyjax.PolynomialSpec`, one degree), instead of
-            ``variables``, ``degree``, ``basis``, ``interactions``, ``link`` and ``eps``.
+            ``variables``, ``degree``, ``basis``, ``interactions``, ``link``, ``eps`` and ``clamp``.
 
     Returns:
         :class:`polyjax.PolynomialBRDF` with batch shape ``(3,)`` (R, G, B lanes) that renders like any
@@ -127,8 +132,8 @@ def fit_polynomial_to_images(
             or a scene with inter-reflections.
     """
     spec = spec_of("fit_polynomial_to_images", spec, _SPEC_DEFAULTS, variables=variables, degree=degree,
-                   basis=basis, interactions=interactions, link=link, eps=eps)
-    variables, degree, basis, interactions, link, eps = (getattr(spec, k) for k in SPEC_FIELDS)
+                   basis=basis, interactions=interactions, link=link, eps=eps, clamp=clamp)
+    variables, degree, basis, interactions, link, eps, clamp = (getattr(spec, k) for k in SPEC_FIELDS)
     vs = _check_image_fit_options(variables, degree, basis, method)
     if int(robust_steps) != robust_steps or int(robust_steps) < 0:
         raise InputError(f"robust_steps: expected a non-negative integer, found {robust_steps!r}")
@@ -142,16 +147,16 @@ def fit_polynomial_to_images(
         options = dict(basis=basis, interactions=bool(interactions), method=method, rcond=rcond)
         if link == "log":
             options.update(link="log", eps=eps, steps=steps)
-        return fit_samples(rows, vs.name, int(degree), weighting=weighting, robust_steps=int(robust_steps),
-                           options=options)
+        return with_clamp(fit_samples(rows, vs.name, int(degree), weighting=weighting,
+                                      robust_steps=int(robust_steps), options=options), clamp)
     u, v, c, y, wpx, keep = rows.u, rows.v, rows.weight, rows.values, rows.pixel_weights, rows.keep
     # one design for the three channels when every light is grey (the same weights in R, G and B)
     shared = False
     if is_concrete(c):
         cn = np.asarray(c)
         shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
-    return _solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
-                  interactions=bool(interactions), method=method, rcond=rcond, shared=shared)
+    return with_clamp(_solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
+                                    interactions=bool(interactions), method=method, rcond=rcond, shared=shared), clamp)
 
 
 #: the keyword defaults of :func:`fit_polynomial_to_images` that :class:`polyjax.PolynomialSpec` groups

@@ -15,7 +15,7 @@ fit from images is :func:`polyjax.fit_polynomial` on those samples (which takes 
   share one design: one solve with three right-hand sides, streamed when tall, where radiance weights need a
   design per channel. Measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``, Rusinkiewicz ``p = 8``
   with interactions, every pixel kept): held-out relative RMS 0.072 (BRDF) and 0.070 (radiance), the BRDF-space
-  fit several times faster (0.34 s against 2.7 s), which buys a higher degree (``p = 10``: 0.064; with
+  fit several times faster (0.39 s against 1.5 s), which buys a higher degree (``p = 10``: 0.064; with
   ``link="log"``, ``p = 8``: 0.063). Keeping the grazing pixels (no cutoff) keeps the polynomial from
   extrapolating there under other lights (with an 80-degree cutoff: 0.074 and 0.081).
 

@@ -118,7 +118,8 @@ def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *,
         meta = dict(
             format=FORMAT, height=int(row0 + height), batch_shape=list(model.batch_shape), variables=model.variables,
             basis=model.basis, interactions=model.interactions, max_degree=model.max_degree, link=model.link,
-            eps=float(model.eps), formats=list(formats), exr_precision=exr_precision if "exr" in formats else None,
+            eps=float(model.eps), clamp=bool(model.clamp), formats=list(formats),
+            exr_precision=exr_precision if "exr" in formats else None,
             fields=fields,
             shards=[dict(rows=[row0 + a, row0 + b], file=name(a, b, formats[0]),
                          files={f: name(a, b, f) for f in formats}, process=p) for (a, b), p in sorted(shards.items())],
@@ -181,7 +182,7 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
     return PolynomialBRDF(**{n: device_array(a) for n, a in arrays.items()}, variables=meta["variables"],
                           basis=meta["basis"], interactions=bool(meta["interactions"]),
                           max_degree=int(meta["max_degree"]), link=meta.get("link", "identity"),
-                          eps=float(meta.get("eps", 0.0)))
+                          eps=float(meta.get("eps", 0.0)), clamp=bool(meta.get("clamp", False)))
 
 
 def local_part(model: PolynomialBRDF) -> PolynomialBRDF:

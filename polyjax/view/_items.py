@@ -86,10 +86,15 @@ def _array_list(a) -> list:
 
 
 def _polynomial_info(model: PolynomialBRDF) -> dict:
-    return {"model": "polynomial", "variables": model.variables, "basis": model.basis,
+    info = {"model": "polynomial", "variables": model.variables, "basis": model.basis,
             "degree": _array_list(model.degree), "interactions": bool(model.interactions),
             "parameters": [int(n) for n in np.asarray(model.n_params).ravel()],
             "L2": _array_list(model.l2), "coefficients": _array_list(model.coefficients)}
+    if model.link != "identity":
+        info["link"] = f"{model.link} (f = exp(poly) - {model.eps:g})"
+    if model.clamp:
+        info["outside the fitted samples"] = "clamped to the fitted box (constant extension)"
+    return info
 
 
 def _fit_info(model) -> dict:
