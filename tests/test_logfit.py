@@ -201,10 +201,14 @@ def test_log_fit_shared_program_equals_one_fit_per_solve(monkeypatch, three_lane
     assert np.all(np.asarray(shared.l2) < np.asarray(pj.fit_log_polynomial(u, v, b, steps=0, weights=w, **kw).l2))
 
 
+#: ``$POLYJAX_STREAM_ROWS`` of the tall fits below: 24,000 samples take the lanes' passes of polyjax._fit.lanes as
+#: the 352,745 of the DiLiGenT ball do by default (several blocks of rows, a sample of them for the preconditioner)
+TALL = {"POLYJAX_STREAM_ROWS": "10000"}
+
+
 @pytest.fixture(scope="module")
 def tall_geometry():
-    """120,000 samples: enough for a concrete fit to take the lanes' passes of polyjax._fit.lanes."""
-    return tuple(jnp.asarray(a) for a in synthetic_geometry(120_000, seed=7))
+    return tuple(jnp.asarray(a) for a in synthetic_geometry(24_000, seed=7))
 
 
 def _tall_lanes(u, v, kind):
@@ -221,9 +225,11 @@ def _tall_lanes(u, v, kind):
 
 
 @pytest.mark.parametrize("kind", ["alike", "opposed"])
-def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind):
+def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind, monkeypatch):
     """A concrete tall fit (one preconditioner for every lane and solve, one pass over the held rows per solve) is the
     traced fit's (the design held whole, each lane's solve a QR of its weighted design) to rounding."""
+    for key, value in TALL.items():
+        monkeypatch.setenv(key, value)
     u, v = tall_geometry
     b = _tall_lanes(u, v, kind)
     kw = dict(variables="rusinkiewicz", degree=4, interactions=True, cutoff_deg=70.0)
@@ -238,12 +244,14 @@ def test_log_fit_on_tall_data_equals_the_dense_solves(tall_geometry, kind):
     assert np.all(np.asarray(fast.status) == 0)
 
 
-def test_log_fit_on_tall_rank_deficient_data_is_the_dense_fit():
-    """120,000 samples at 30 distinct direction pairs and 45 terms: no Cholesky factor exists (the shared one fails,
-    then each lane's own), each lane falls back to the dense solve: rank 30, ``RANK_DEFICIENT``, the traced fit's
-    model to rounding."""
+def test_log_fit_on_tall_rank_deficient_data_is_the_dense_fit(monkeypatch):
+    """24,000 samples (tall: :data:`TALL`) at 30 distinct direction pairs and 45 terms: no Cholesky factor exists
+    (the shared one fails, then each lane's own), each lane falls back to the dense solve: rank 30,
+    ``RANK_DEFICIENT``, the traced fit's model to rounding."""
+    for key, value in TALL.items():
+        monkeypatch.setenv(key, value)
     u, v = synthetic_geometry(30, seed=1)
-    u, v = np.tile(u, (4000, 1)), np.tile(v, (4000, 1))
+    u, v = np.tile(u, (800, 1)), np.tile(v, (800, 1))
     h = np.asarray(pj.half_vector(jnp.asarray(u), jnp.asarray(v)))
     b = np.stack([0.2 + np.exp(-(1 / h[:, 2] ** 2 - 1) / 0.1), np.full(len(u), 0.3), 0.1 + 0.5 * h[:, 2]])
     kw = dict(variables="rusinkiewicz", degree=8, interactions=True, cutoff_deg=None)

@@ -3,7 +3,8 @@ after ``polyjax cache clear`` of that folder or a new source stamp): the next pr
 after loads what it wrote, with the first process's numbers, for ``polyjax fit`` and ``baselines.fit`` alike.
 
 An executable that JAX's cache had loaded did not serialise whole: every later process failed when it ran it
-(``NOT_FOUND: Function ..._kernel not found``)."""
+(``NOT_FOUND: Function ..._kernel not found``). The first test is the same sequence within one process (the command
+line's fit); the second, in three processes with ``baselines.fit`` too, is in the slow tier."""
 
 import json
 import os
@@ -11,6 +12,9 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import polyjax as pj
+from polyjax.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,6 +37,20 @@ values = np.array(pj.data.synthetic_default().values)
 f = bl.fit("ward", u, v, values, n_starts=2, max_steps=20)
 print(json.dumps(dict(code=code, fit=json.loads(out.getvalue())["l2"], ward=np.asarray(f.l2).tolist())))
 """
+
+
+def test_a_removed_saved_fit_is_compiled_again_and_its_file_runs(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv(pj.DATA_ENV, raising=False)
+    args = ["--cache-dir", str(tmp_path), "fit", "--degree", "3", "--json"]
+    runs = []
+    for removed in (False, True, False):  # written, written again after its removal, loaded
+        if removed:
+            shutil.rmtree(tmp_path / "polyjax-programs")
+        assert main(args) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+        assert len(list((tmp_path / "polyjax-programs").glob("fit-*.bin"))) == 1
+    assert runs[0]["coefficients"] == runs[1]["coefficients"] == runs[2]["coefficients"]
+    assert runs[0]["l2"] == runs[1]["l2"] == runs[2]["l2"]
 
 
 def _child(folder: Path) -> dict:
