@@ -32,6 +32,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from jax.experimental import serialize_executable
 
 import polyjax as pj
 from polyjax.internal import SAVED_PROGRAMS_ENV as ENV
@@ -146,8 +147,6 @@ def _load(path: Path):
     try:
         payload, in_tree, out_tree, backend = pickle.loads(path.read_bytes())
         load_lapack_kernels()
-        from jax.experimental import serialize_executable
-
         return serialize_executable.deserialize_and_load(payload, in_tree, out_tree), backend
     except Exception as e:  # noqa: BLE001 - a stale or damaged file: reported, then compiled again
         _report("read", path, e)
@@ -164,8 +163,6 @@ def _path(folder: Path, name: str, arrays, options: dict) -> Path:
 
 def _compile(fit, name: str, options: dict, arrays, path: Path):
     """Compile the fit's program for ``arrays`` and write it to ``path``; None when it cannot be compiled."""
-    from jax.experimental import serialize_executable
-
     run = _program(fit, name, options)
     backend = []
 

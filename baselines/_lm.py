@@ -22,8 +22,8 @@ if TYPE_CHECKING:
 
 
 def lm_solver(rtol: float, atol: float) -> optx.LevenbergMarquardt:
-    import lineax as lx
-    import optimistix as optx
+    import lineax as lx  # on first use: a fit served by its saved program never needs it (module docs)
+    import optimistix as optx  # likewise
 
     # normal equations + Cholesky for the small damped (P x P) system: cheaper than QR, and the damping keeps it SPD
     return optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
@@ -41,7 +41,7 @@ def lm_solve(fn, raw0, args, budget, rtol, atol):
     ``code`` a :class:`polyjax.RESULTS` (``OK`` converged, ``MAX_STEPS`` budget spent, ``NONFINITE``, ``FAILED``).
     Not differentiable (a while loop); the fit differentiates its optimum by the implicit function theorem.
     """
-    import optimistix as optx
+    import optimistix as optx  # on first use: a fit served by its saved program never traces this (module docs)
 
     solver = lm_solver(rtol, atol)
     r = optx.RESULTS
