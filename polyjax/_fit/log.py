@@ -319,8 +319,9 @@ def _shared_kernel(inp, u, v, w, mask, *, variables, degree, basis, interactions
     values = inp.values
     w_fit, wc2 = fit_weights(u, v, w, mask, cutoff_deg)  # equation (11)'s weights, made once for every score
     keep = w_fit > 0  # the fitted samples; the model may overflow elsewhere
-    kept = cutoff_mask(inp.u, inp.v, cutoff_deg) & inp.mask  # fit_weights of the solves' weights, made once
-    cos_u = jnp.where(cutoff_mask(inp.u, inp.v, cutoff_deg), cos_theta(inp.u), 0.0)
+    inside = cutoff_mask(inp.u, inp.v, cutoff_deg)
+    kept = inside & inp.mask  # fit_weights of the solves' weights, made once
+    cos_u = jnp.where(inside, cos_theta(inp.u), 0.0)
 
     def weights(target, wt):  # (w, w cos^2) of a solve: fit_weights' arithmetic, 0 off the fitted samples
         wl = jnp.where(kept, jnp.where(keep & jnp.isfinite(target) & jnp.isfinite(wt), wt, 0.0), 0.0)
