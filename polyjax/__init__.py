@@ -27,7 +27,7 @@ from ._fit.log import fit_log_polynomial
 from ._fit.polynomial import fit_polynomial, n_parameters
 from ._io import load_model, model_metadata, save_model
 from ._measurements import Measurements, check_samples, make_measurements
-from ._metrics import l2_error, psnr
+from ._metrics import l2_error, log_error, psnr
 from ._model import PolynomialBRDF, PolynomialSpec, evaluate_paper_form
 from ._pca import PCA, fit_pca
 from ._results import RESULTS, deprecated_alias
@@ -79,8 +79,9 @@ __all__ = [
     "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form", "explanatory_variables",
     "exponents", "export", "fit_log_polynomial", "fit_pca", "fit_polynomial", "fit_polynomial_to_images", "FitError",
     "fitted_design", "get_variables", "half_vector", "has_data_root", "image_rows", "ImageRows", "InputError",
-    "inverse", "l2_error", "lapack_threads", "load_model", "LstsqSolution", "make_measurements", "Measurements",
-    "model_metadata", "n_parameters", "n_terms", "PCA", "PolyjaxError", "PolynomialBRDF", "PolynomialSpec", "psnr",
+    "inverse", "l2_error", "lapack_threads", "log_error", "load_model", "LstsqSolution", "make_measurements",
+    "Measurements", "model_metadata", "n_parameters", "n_terms", "PCA", "PolyjaxError", "PolynomialBRDF",
+    "PolynomialSpec", "psnr",
     "reflect", "register_variables",
     "relight", "render", "RESULTS", "safe_normalize", "save_model", "spherical_to_cartesian", "svbrdf", "THREADS_ENV",
     "UnknownNameError", "variable_sets", "VariableSet", "view", "weighted_lstsq"

@@ -103,18 +103,6 @@ def _one_material(data, index, src):
                                 mask=lane(data.mask))
 
 
-def log_error(values, predicted, u, v, weights, mask, cutoff_deg: float = 80.0) -> np.ndarray:
-    r"""Per channel: the weighted L2 of ``log(1 + f cos theta_u) - log(1 + b cos theta_u)`` over the samples of
-    equation (11) (``f``, ``b`` clamped at 0)."""
-    cu = np.asarray(u)[:, 2]
-    cv = np.asarray(v)[:, 2]
-    c = np.cos(np.radians(cutoff_deg))
-    keep = np.asarray(mask) & (cu >= c) & (cv >= c)
-    w = np.where(keep, np.asarray(weights), 0.0)
-    r = np.log1p(np.maximum(predicted, 0.0) * cu) - np.log1p(np.maximum(values, 0.0) * cu)
-    return np.sqrt(np.sum(w * r * r, -1) / np.maximum(np.sum(w, -1), 1e-300))
-
-
 def run_standard_export(args) -> int:
     """Fit the target's standard model to ``args.model`` and write it (see the module docs)."""
     jax.config.update("jax_enable_x64", True)
@@ -133,7 +121,7 @@ def run_standard_export(args) -> int:
     l2 = np.asarray(fit.l2)
     own = np.asarray(pj.l2_error(values, np.zeros_like(values), data.u, data.v, weights=data.weights,
                                  mask=data.mask))
-    lg = log_error(values, pred, data.u, data.v, data.weights, data.mask)
+    lg = np.asarray(pj.log_error(values, pred, data.u, data.v, data.weights, cutoff_deg=80.0, mask=data.mask))
     getattr(export, writer)(fit.material(), out)
     print(f"{model_name} fitted to {args.model} (status {[int(s) for s in np.asarray(fit.status)]}):")
     print("  L2 (eq. 11) R, G, B: " + ", ".join(f"{x:.4g}" for x in l2)
