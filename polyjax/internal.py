@@ -23,7 +23,9 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   measuring or checking what a first call does);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving` (a
-  fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does).
+  fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does);
+- files: :func:`write_atomically`, :func:`write_bytes_atomically` (every output written whole or not at all),
+  :func:`check_output_path` (an output path checked before any work).
 """
 
 from ._arrays import cast_concrete, device_array, is_concrete, is_traced
@@ -32,6 +34,7 @@ from ._cache.keys import program_key, source_stamp
 from ._cache.memo import forget_all as forget_memos
 from ._cache.memo import grid_memo
 from ._config import configured_data_root, data_file
+from ._files import check_output_path, write_atomically, write_bytes_atomically
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
 from ._fit.saved import FOLDER as SAVED_PROGRAMS_FOLDER
 from ._fit.saved import _load_lapack as load_lapack_kernels
@@ -51,4 +54,5 @@ __all__ = [
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
     "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
+    "check_output_path", "write_atomically", "write_bytes_atomically",
 ]

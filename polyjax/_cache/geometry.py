@@ -30,6 +30,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from .._files import make_cache_folder, write_bytes_atomically
 from .compilation import cache_disabled_by_env
 
 #: subfolder of the compilation cache folder holding the geometries
@@ -100,10 +101,7 @@ def save(folder: Path, key: str, geo: dict) -> None:
         arrays = {name: np.asarray(geo[name]) for name in FIELDS}
         buf = io.BytesIO()
         np.savez(buf, key=np.asarray(key), checksum=np.asarray(_checksum(arrays)), **arrays)
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"geometry-{key}.npz"
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(buf.getvalue())
-        os.replace(tmp, path)
+        make_cache_folder(folder)
+        write_bytes_atomically(folder / f"geometry-{key}.npz", buf.getvalue(), mode=0o600)
     except OSError:  # a read-only or full disk: nothing kept
         pass

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import check_output_path, write_bytes_atomically
 from .._model import PolynomialBRDF
 from ..data._nbrdf import NeuralBRDF
 from ._expr import program
@@ -65,12 +66,11 @@ def brdf_explorer(model, path: str | os.PathLike) -> Path:
     The file holds an empty parameter block and the GLSL of :func:`glsl` between ``::begin shader`` and
     ``::end shader``. Returns the path written.
     """
+    path = check_output_path(path, "path")
     src = glsl(model)
     text = ("analytic\n\n# exported by polyjax\n\n::begin parameters\n::end parameters\n\n"
             f"::begin shader\n\n{src}\n::end shader\n")
-    path = Path(path)
-    path.write_text(text)
-    return path
+    return write_bytes_atomically(path, text.encode())
 
 
 def numpy_function(model):

@@ -1,0 +1,22 @@
+"""The one owner of what polyjax writes on the user's disk.
+
+- :mod:`.atomic`: every output file is written through :func:`write_atomically` (a temporary file made with
+  ``tempfile.mkstemp`` in the target's folder, flushed and fsynced, then renamed over the target; removed on any
+  failure), after :func:`check_output_path` has checked the target before any work;
+- :mod:`.trust`: whether a folder or file may be trusted to hold programs polyjax loads (owned by the current user,
+  not writable by group or others), and the ownership marker of polyjax's cache folders.
+"""
+
+from .atomic import check_output_path, write_atomically, write_bytes_atomically
+from .trust import (
+                    MARKER,
+                    UntrustedFolderWarning,
+                    is_polyjax_folder,
+                    make_cache_folder,
+                    trusted,
+                    untrusted_reason,
+                    warn_untrusted,
+)
+
+__all__ = ["MARKER", "UntrustedFolderWarning", "check_output_path", "is_polyjax_folder", "make_cache_folder",
+           "trusted", "untrusted_reason", "warn_untrusted", "write_atomically", "write_bytes_atomically"]
