@@ -7,7 +7,7 @@
   not writable by group or others), and the ownership marker of polyjax's cache folders.
 """
 
-from .atomic import check_output_path, write_atomically, write_bytes_atomically
+from .atomic import check_output_path, write_atomically, write_bytes_atomically, write_npz_atomically
 from .trust import (
                     MARKER,
                     UntrustedFolderWarning,
@@ -19,4 +19,5 @@ from .trust import (
 )
 
 __all__ = ["MARKER", "UntrustedFolderWarning", "check_output_path", "is_polyjax_folder", "make_cache_folder",
-           "trusted", "untrusted_reason", "warn_untrusted", "write_atomically", "write_bytes_atomically"]
+           "trusted", "untrusted_reason", "warn_untrusted", "write_atomically", "write_bytes_atomically",
+           "write_npz_atomically"]

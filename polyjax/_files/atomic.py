@@ -16,6 +16,8 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from .._errors import InputError
 
 
@@ -121,4 +123,17 @@ def write_bytes_atomically(path: str | os.PathLike, data: bytes, *, mode: int | 
     return write_atomically(path, write, mode=mode)
 
 
-__all__ = ["check_output_path", "write_atomically", "write_bytes_atomically"]
+
+
+def write_npz_atomically(path: str | os.PathLike, **arrays) -> Path:
+    """:func:`write_atomically` of ``np.savez(file, **arrays)`` (written into the open file: numpy would append
+    ``.npz`` to a name that does not end with it)."""
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+
+    return write_atomically(path, write)
+
+
+__all__ = ["check_output_path", "write_atomically", "write_bytes_atomically", "write_npz_atomically"]
