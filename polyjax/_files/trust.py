@@ -28,9 +28,10 @@ class UntrustedFolderWarning(UserWarning):
     """A cache folder or file that others could have written: nothing in it is loaded."""
 
 
-def make_cache_folder(folder: str | os.PathLike) -> Path:
-    """Create the cache folder ``folder`` (mode ``0700``; missing parents as ``mkdir -p`` makes them) and mark it as
-    polyjax's (:data:`MARKER`); a folder that exists already is left as it is (and unmarked if it was).
+def make_cache_folder(folder: str | os.PathLike, *, mark: bool = True) -> Path:
+    """Create the cache folder ``folder`` (mode ``0700``; missing parents as ``mkdir -p`` makes them) and, with
+    ``mark``, mark it as polyjax's (:data:`MARKER`; subfolders of a cache folder are not marked); a folder that exists
+    already is left as it is (and unmarked if it was).
 
     Raises:
         OSError: the folder cannot be created.
@@ -44,10 +45,23 @@ def make_cache_folder(folder: str | os.PathLike) -> Path:
     except FileExistsError:  # made meanwhile by another process: its creator marks it
         return folder
     os.chmod(folder, 0o700)  # whatever the umask
-    fd = os.open(folder / MARKER, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    if mark:
+        mark_cache_folder(folder)
+    return folder
+
+
+def mark_cache_folder(folder: str | os.PathLike) -> None:
+    """Write polyjax's marker (:data:`MARKER`) into ``folder`` unless it is there (``O_EXCL``: never through a
+    planted link)."""
+    folder = Path(folder)
+    if is_polyjax_folder(folder):
+        return
+    try:
+        fd = os.open(folder / MARKER, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return
     with os.fdopen(fd, "wb") as f:
         f.write(_MARKER_TEXT)
-    return folder
 
 
 def is_polyjax_folder(folder: str | os.PathLike) -> bool:
@@ -95,5 +109,5 @@ def trusted(*paths: str | os.PathLike, what: str) -> bool:
     return True
 
 
-__all__ = ["MARKER", "UntrustedFolderWarning", "is_polyjax_folder", "make_cache_folder", "trusted",
+__all__ = ["MARKER", "UntrustedFolderWarning", "is_polyjax_folder", "make_cache_folder", "mark_cache_folder", "trusted",
            "untrusted_reason", "warn_untrusted"]

@@ -13,7 +13,7 @@ import sys
 
 import jax
 
-from .._cache.compilation import cache_disabled_by_env, enable_compilation_cache
+from .._cache.compilation import cache_disabled_by_env, cache_uses, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
 from ._args import add_global_options
 from ._cache import cache_cap_bytes, trim_cache
@@ -72,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = _command_module(COMMANDS["report"]).cmd_report
+    uses = cache_uses()
     try:
         args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
         return int(args.func(args) or 0)
@@ -79,12 +80,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
     finally:
-        _trim(getattr(args, "cache_in_use", None))
+        _trim(getattr(args, "cache_in_use", None), cache_uses() > uses)
 
 
-def _trim(folder) -> None:
-    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`)."""
-    if folder is None:
+def _trim(folder, opened: bool) -> None:
+    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`): not after a run that
+    never opened it (``opened`` False: one that failed on its arguments, say)."""
+    if folder is None or not opened:
         return
     try:
         trim_cache(folder, cache_cap_bytes())

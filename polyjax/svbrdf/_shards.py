@@ -22,7 +22,7 @@ import numpy as np
 
 from .._arrays import device_array
 from .._errors import DataFormatError, DataNotFoundError, InputError
-from .._files import write_bytes_atomically, write_npz_atomically
+from .._files import inside_folder, write_bytes_atomically, write_npz_atomically
 from .._model import PolynomialBRDF
 from ._exr import channel_layout, read_exr_shard, write_exr_shard
 
@@ -172,7 +172,7 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
         a, b = shard["rows"]
         if b <= lo or a >= hi:
             continue
-        f = d / shard.get("files", {"npz": shard["file"]})[fmt]
+        f = inside_folder(d, shard.get("files", {"npz": shard["file"]})[fmt], d / MANIFEST, f"shard rows {a}-{b}")
         if not f.is_file():
             raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(d / MANIFEST)!r}; it is "
                                     "missing")
