@@ -27,7 +27,7 @@ _MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of a polyjax model (written by `po
     import mitsuba as mi
     mi.set_variant("llvm_ad_rgb")        # or "scalar_rgb"
     import <this file's name>
-    <this file's name>.register()        # then {"type": NAME} in mi.load_dict / scene files
+    <this file's name>.register()        # then {{"type": NAME}} in mi.load_dict / scene files
 """
 
 MODEL = {model}
