@@ -156,16 +156,21 @@ def test_program_in_a_folder_others_may_write_is_not_loaded(tmp_path):
 
 
 # ---------------------------------------------------------------- item 3: user strings in generated code
+def _model(batch=()):
+    """A polynomial model of degree 1 in the Ashikhmin-Shirley variables (``k = 2``), built without a fit."""
+    b = tuple(batch)
+    return pj.PolynomialBRDF(
+        coefficients=np.broadcast_to([0.2, 0.1, 0.05], b + (3,)).copy(), degree=np.ones(b, int),
+        mean=np.zeros(b + (2,)), rotation=np.broadcast_to(np.eye(2), b + (2, 2)).copy(), centre=np.zeros(b + (2,)),
+        halfwidth=np.ones(b + (2,)), l2=np.zeros(b), rank=np.full(b, 3), condition=np.ones(b),
+        n_used=np.full(b, 10), status=np.zeros(b, int), variables="ashikhmin-shirley", basis="monomial",
+        interactions=False, max_degree=1)
+
+
 @pytest.fixture(scope="module")
 def saved_model(tmp_path_factory):
-    """A small fitted model saved under a file name holding a docstring's quotes."""
-    rng = np.random.default_rng(0)
-    u = rng.normal(size=(60, 3)) * [0.3, 0.3, 0] + [0, 0, 1]
-    v = rng.normal(size=(60, 3)) * [0.3, 0.3, 0] + [0, 0, 1]
-    u, v = (a / np.linalg.norm(a, axis=1, keepdims=True) for a in (u, v))
-    model = pj.fit_polynomial(u, v, 0.2 + 0.1 * u[:, 0] ** 2, variables="ashikhmin-shirley", degree=1)
-    folder = tmp_path_factory.mktemp('odd"""name')
-    return pj.save_model(folder / 'm"""x.npz', model)
+    """A small model saved under a file name holding a docstring's quotes."""
+    return pj.save_model(tmp_path_factory.mktemp('odd"""name') / 'm"""x.npz', _model())
 
 
 def test_plugin_name_injection_refused(saved_model, tmp_path, capsys):
@@ -279,11 +284,7 @@ def test_paths_in_inputs_stay_inside(tmp_path):
     shards = tmp_path / "texture"
     shards.mkdir()
     (shards / "manifest.json").write_text(json.dumps({"format": "polyjax-texture-shards-1"}))
-    model = pj.PolynomialBRDF(coefficients=np.zeros((2, 1, 3)), degree=np.ones((2, 1), int), mean=np.zeros((2, 1, 2)),
-                              rotation=np.tile(np.eye(2), (2, 1, 1, 1)), centre=np.zeros((2, 1, 2)),
-                              halfwidth=np.ones((2, 1, 2)), l2=np.zeros((2, 1)), rank=np.ones((2, 1), int),
-                              condition=np.ones((2, 1)), n_used=np.ones((2, 1), int), status=np.zeros((2, 1), int),
-                              variables="ashikhmin-shirley", basis="monomial", interactions=False, max_degree=1)
+    model = _model((2, 1))
     manifest = pj.svbrdf.write_texture_shards(shards, model)
     meta = json.loads(manifest.read_text())
     meta["shards"][0]["files"]["npz"] = str(tmp_path / "elsewhere.npz")

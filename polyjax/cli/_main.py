@@ -58,10 +58,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _compilation_cache(args):
-    """Turn on the persistent compilation cache unless ``--no-cache`` or ``POLYJAX_CACHE=off``; its folder or None."""
+    """Turn on the persistent compilation cache unless ``--no-cache`` or ``POLYJAX_CACHE=off``; its folder, or None
+    (also when the folder may not be trusted: then nothing is loaded from it or written to it, and it is not
+    trimmed)."""
     if args.no_cache or (args.cache_dir is None and cache_disabled_by_env()):
         return None
-    return enable_compilation_cache(args.cache_dir)
+    folder = enable_compilation_cache(args.cache_dir)
+    return folder if jax.config.jax_enable_compilation_cache else None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,15 +75,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = _command_module(COMMANDS["report"]).cmd_report
-    uses = cache_uses()
+    uses, status = cache_uses(), 2
     try:
         args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        return status
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
-    finally:
-        _trim(getattr(args, "cache_in_use", None), cache_uses() > uses)
+    finally:  # a run that looked the cache up or wrote to it, or that ran to its end, opened it
+        _trim(getattr(args, "cache_in_use", None), cache_uses() > uses or status == 0)
 
 
 def _trim(folder, opened: bool) -> None:
