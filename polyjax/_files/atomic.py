@@ -3,15 +3,16 @@
 :func:`write_atomically` hands the caller's ``write`` a temporary file created by ``tempfile.mkstemp`` (``O_EXCL``:
 an unpredictable name that no existing file or symbolic link can stand in for) in the target's own folder and with
 the target's suffix (MaterialX, USD and OpenEXR writers pick their format by it). The file is flushed to disk
-(``fsync``), given the permissions a new file of the user gets (``0666`` less the umask, or ``mode``) and renamed
-over the target with ``os.replace``, which is atomic on one file system: a reader sees the old file or the new one,
-never half of one. On any failure, ``KeyboardInterrupt`` included, the temporary file is removed and the target is
+(``fsync``), given the permissions of the file it replaces or of a new file of the user (``0666`` less the umask),
+or ``mode``, and renamed over the target with ``os.replace``, which is atomic on one file system: a reader sees the
+old file or the new one, never half of one (a symbolic link at the target is replaced, not written through). On any failure, ``KeyboardInterrupt`` included, the temporary file is removed and the target is
 left as it was.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -60,6 +61,18 @@ def _umask() -> int:
     return mask
 
 
+def _mode_for(path: Path) -> int:
+    """The permission bits of the regular file ``path`` replaces, else those of a new file (``0o666`` less the
+    umask)."""
+    try:
+        st = os.lstat(path)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    return 0o666 & ~_umask()
+
+
 def _fsync_path(path: str | os.PathLike) -> None:
     """Flush a file (or a folder's entries) to disk; a file system that cannot is left as it is."""
     try:
@@ -81,7 +94,8 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *
         path: the target file; its folder must exist (see :func:`check_output_path`).
         write: called once as ``write(tmp)`` with the temporary file's path (already created, empty, same folder
             and suffix as ``path``); it writes the whole content there (by name: it may reopen or truncate it).
-        mode: the new file's permission bits; by default ``0o666`` less the umask, as a plain ``open`` makes.
+        mode: the new file's permission bits; by default those of the file it replaces, else ``0o666`` less the
+            umask, as a plain ``open`` makes.
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
@@ -103,7 +117,7 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *
     try:
         write(tmp)
         _fsync_path(tmp)
-        os.chmod(tmp, (0o666 & ~_umask()) if mode is None else mode)
+        os.chmod(tmp, _mode_for(path) if mode is None else mode)
         os.replace(tmp, path)
         done = True
     finally:
