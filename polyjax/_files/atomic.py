@@ -5,8 +5,8 @@ an unpredictable name that no existing file or symbolic link can stand in for) i
 the target's suffix (MaterialX, USD and OpenEXR writers pick their format by it). The file is flushed to disk
 (``fsync``), given the permissions of the file it replaces or of a new file of the user (``0666`` less the umask),
 or ``mode``, and renamed over the target with ``os.replace``, which is atomic on one file system: a reader sees the
-old file or the new one, never half of one (a symbolic link at the target is replaced, not written through). On any failure, ``KeyboardInterrupt`` included, the temporary file is removed and the target is
-left as it was.
+old file or the new one, never half of one (a symbolic link at the target is replaced, not written through). On
+any failure, ``KeyboardInterrupt`` included, the temporary file is removed and the target is left as it was.
 """
 
 from __future__ import annotations
