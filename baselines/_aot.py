@@ -8,7 +8,9 @@ of time and serialised (:mod:`jax.experimental.serialize_executable`) into ``<ca
 the way :mod:`polyjax._fit.saved` keys its programs: the input shapes and dtypes (and which are None), every option
 of the fit, the versions of JAX and jaxlib, the machine and its device kind, float64 on or off, XLA's options, and the
 source files of polyjax and baselines (their sizes and modification times). A later process with the same key loads
-the executable and runs it; within a process the last 16 executables stay loaded.
+the executable and runs it; within a process the last 16 executables stay loaded. The file is written and read by
+:func:`polyjax.internal.save_program` / :func:`polyjax.internal.load_program` (no pickle, the executable's digest
+checked, nothing loaded from a folder or file that another user owns or others may write).
 
 It is on whenever JAX's persistent compilation cache is (:func:`polyjax.enable_compilation_cache`, on by default in
 the command line), and off with ``POLYJAX_SAVED_PROGRAMS=off`` or ``POLYJAX_CACHE=off``. The program takes the
@@ -26,13 +28,11 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import os
-import pickle
 import warnings
 from pathlib import Path
 
 import jax
 import numpy as np
-from jax.experimental import serialize_executable
 
 import polyjax as pj
 from polyjax.internal import SAVED_PROGRAMS_ENV as ENV
@@ -40,8 +40,9 @@ from polyjax.internal import SAVED_PROGRAMS_FOLDER as FOLDER
 from polyjax.internal import (
     cache_disabled_by_env,
     compile_for_saving,
-    load_lapack_kernels,
+    load_program,
     program_key,
+    save_program,
     source_stamp,
 )
 
@@ -142,12 +143,12 @@ def _program(fit, name: str, options: dict):
 
 def _load(path: Path):
     """The executable kept at ``path`` and its backend name; None when there is none or it cannot be read."""
-    if not path.is_file():
-        return None
     try:
-        payload, in_tree, out_tree, backend = pickle.loads(path.read_bytes())
-        load_lapack_kernels()
-        return serialize_executable.deserialize_and_load(payload, in_tree, out_tree), backend
+        got = load_program(path)  # no pickle; None for a missing file or one in a folder others may write
+        if got is None:
+            return None
+        compiled, extra = got
+        return compiled, str(extra["backend"])
     except Exception as e:  # noqa: BLE001 - a stale or damaged file: reported, then compiled again
         _report("read", path, e)
         return None
@@ -179,10 +180,7 @@ def _compile(fit, name: str, options: dict, arrays, path: Path):
         _report("compiled", path, e)
         return None
     try:  # serialised before its first run (an executable that has run may no longer serialise: its sort kernels)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(pickle.dumps((*serialize_executable.serialize(compiled), backend[0])))
-        os.replace(tmp, path)
+        save_program(path, compiled, {"backend": str(backend[0])})
     except Exception as e:  # noqa: BLE001 - used in this process all the same
         _report("written", path, e)
     return compiled, backend[0]

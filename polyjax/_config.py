@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from ._errors import DataNotFoundError, InputError
+from ._files.atomic import check_output_path
 
 DATA_ENV = "POLYJAX_DATA"
 
@@ -81,20 +82,13 @@ def data_file(relative: str, root: str | os.PathLike | None = None) -> Path:
 
 
 def check_output_file(path: str | os.PathLike, flag: str) -> Path:
-    """``path`` can be written: its folder exists and is writable, and it is not itself a folder.
+    """``path`` can be written: its folder exists and is writable, and it is not itself a folder
+    (:func:`polyjax._files.check_output_path`).
 
     Raises:
         InputError: naming ``flag`` and the path.
     """
-    p = Path(path).expanduser()
-    parent = p.parent if str(p.parent) else Path(".")
-    if p.is_dir():
-        raise InputError(f"{flag} {str(p)!r}: expected a file name, found a folder")
-    if not parent.is_dir():
-        raise InputError(f"{flag} {str(p)!r}: the folder {str(parent)!r} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
-        raise InputError(f"{flag} {str(p)!r}: not writable")
-    return p
+    return check_output_path(path, flag)
 
 
 def check_output_dir(path: str | os.PathLike, flag: str) -> Path:

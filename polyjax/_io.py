@@ -43,6 +43,7 @@ import numpy as np
 
 from ._arrays import device_array
 from ._errors import DataFormatError, DataNotFoundError, InputError, UnknownNameError
+from ._files import check_output_path, write_atomically
 from ._model import RESULTS, PolynomialBRDF
 
 ENTRY_POINT_GROUP = "polyjax.models"
@@ -230,9 +231,10 @@ def save_model(path: str | os.PathLike, model, *, metadata: dict | None = None) 
         registered again before loading.
 
     Raises:
-        InputError: a suffix other than ``.npz`` / ``.json``, metadata that is not a dict of JSON values.
+        InputError: a suffix other than ``.npz`` / ``.json``, a path that is a folder or in a missing or read-only
+            folder, metadata that is not a dict of JSON values.
     """
-    path = Path(path)
+    path = check_output_path(path, "save_model: path")
     if path.suffix not in (".npz", ".json"):
         raise InputError(f"path {str(path)!r}: expected a model file name ending in .npz or .json, found suffix "
                          f"{path.suffix or '(none)'!r}")
@@ -290,14 +292,14 @@ def _json_float(x):
 
 
 def _write_whole(path: Path, write) -> None:
-    """``write(file)`` into a temporary file beside ``path``, then renamed onto it: never a half-written model."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    """``write(file)`` into the open temporary file of :func:`polyjax._files.write_atomically`: never a
+    half-written model."""
+
+    def to_file(tmp: Path) -> None:
         with open(tmp, "wb") as f:
             write(f)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+
+    write_atomically(path, to_file)
 
 
 def _read_file(path: Path, arrays: bool) -> tuple:

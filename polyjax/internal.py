@@ -22,8 +22,12 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   MERL loader's grid), :func:`forget_memos` (every in-process memo forgotten: the state of a fresh process, for
   measuring or checking what a first call does);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
-  :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving` (a
-  fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does).
+  :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
+  :func:`save_program`, :func:`load_program` (a fitter keeping its compiled executable beside the compilation cache,
+  as ``polyjax fit`` does: no pickle, a digest checked, nothing loaded from a folder others may write);
+- files: :func:`write_atomically`, :func:`write_bytes_atomically` (every output written whole or not at all),
+  :func:`check_output_path` (an output path checked before any work); :func:`make_cache_folder` (a cache folder made
+  polyjax's own: mode ``0700`` and the marker that lets the size cap and ``polyjax cache clear`` touch its entries).
 """
 
 from ._arrays import cast_concrete, device_array, is_concrete, is_traced
@@ -31,10 +35,11 @@ from ._cache.compilation import cache_disabled_by_env, compile_for_saving
 from ._cache.keys import program_key, source_stamp
 from ._cache.memo import forget_all as forget_memos
 from ._cache.memo import grid_memo
+from ._cache.programs import load_lapack_kernels, load_program, save_program
 from ._config import configured_data_root, data_file
+from ._files import check_output_path, make_cache_folder, write_atomically, write_bytes_atomically
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
 from ._fit.saved import FOLDER as SAVED_PROGRAMS_FOLDER
-from ._fit.saved import _load_lapack as load_lapack_kernels
 from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
 from ._io import ModelKind, fitter_for, kind_named, kind_of, model_kinds, module_kind, register_model_kind
 from ._metrics import fit_weights
@@ -45,10 +50,12 @@ from ._solve.threads import one_lapack_thread
 
 __all__ = [
     "SAVED_PROGRAMS_ENV", "SAVED_PROGRAMS_FOLDER", "cache_disabled_by_env", "compile_for_saving", "load_lapack_kernels",
+    "load_program", "save_program",
     "program_key",
     "source_stamp",
     "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
     "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
+    "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
 ]

@@ -356,25 +356,24 @@ def test_fit_images_example_is_written_and_fits(capsys, tmp_path):
 # ---------------------------------------------------------------- 17: cache info|clear, a size cap (the progress line:
 # tests/test_latency.py::test_compile_notice_and_progress_line_say_what_is_happening)
 def test_cache_info_and_clear_commands(capsys, tmp_path):
-    folder = tmp_path / "cache"
+    folder = pj.internal.make_cache_folder(tmp_path / "cache")  # polyjax's own: marked
     (folder / "polyjax-programs").mkdir(parents=True)
-    (folder / "jit_fit-abc-cache").write_bytes(b"x" * 2048)
-    (folder / "polyjax-programs" / "fit-1.bin").write_bytes(b"y" * 1024)
+    (folder / f"jit_fit-{'ab' * 32}-cache").write_bytes(b"x" * 2048)
+    (folder / "polyjax-programs" / f"fit-{'1' * 32}.bin").write_bytes(b"y" * 1024)
     assert main(["--cache-dir", str(folder), "cache", "info"]) == 0
     out = capsys.readouterr().out
-    assert "2 file(s)" in out and "polyjax-programs: 1 file(s)" in out and "cap 2048 MiB" in out
+    assert "remove 2 file(s)" in out and "polyjax-programs: 1 file(s)" in out and "cap 2048 MiB" in out
     assert main(["--cache-dir", str(folder), "cache", "clear"]) == 0
     assert "removed 2 file(s)" in capsys.readouterr().out
-    assert folder.is_dir() and not [p for p in folder.rglob("*") if p.is_file()]
+    assert folder.is_dir() and [p.name for p in folder.rglob("*") if p.is_file()] == ["POLYJAX-CACHE"]
 
 
 def test_cache_folder_is_trimmed_to_its_cap_after_a_run_oldest_first(capsys, tmp_path, monkeypatch, no_data):
     import os
 
-    folder = tmp_path / "cache"
-    folder.mkdir()
+    folder = pj.internal.make_cache_folder(tmp_path / "cache")
     for i in range(4):  # 4 x 0.4 MiB, oldest first
-        p = folder / f"old-{i}-cache"
+        p = folder / f"jit_old{i}-{'0' * 64}-cache"
         p.write_bytes(b"z" * (400 * 1024))
         os.utime(p, (1000 + i, 1000 + i))
     monkeypatch.setenv("POLYJAX_CACHE_MAX_MB", "1")
@@ -382,7 +381,7 @@ def test_cache_folder_is_trimmed_to_its_cap_after_a_run_oldest_first(capsys, tmp
     assert main(["--cache-dir", str(folder), "fit", "--degree", "2", "--json"]) == 0
     left = sorted(p.name for p in folder.rglob("*") if p.is_file())
     assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 0.8 * 2**20
-    assert "old-0-cache" not in left and "old-1-cache" not in left
+    assert not {f"jit_old{i}-{'0' * 64}-cache" for i in (0, 1)} & set(left)
 
 
 # ---------------------------------------------------------------- 1: every export target for a baseline fit

@@ -17,6 +17,7 @@ import jax
 import jax.monitoring
 
 from .._errors import InputError
+from .._files import make_cache_folder, mark_cache_folder, trusted, untrusted_reason
 
 #: environment variable naming the cache folder; empty, ``off``, ``0``, ``no`` or ``false`` disables the cache
 CACHE_ENV = "POLYJAX_CACHE"
@@ -49,12 +50,19 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     compiling them (a warm ``polyjax fit`` takes about 0.4 of a cold one: ``benchmarks/bench_latency_cli.py``).
     Tracing and lowering still run in every process (the cache is keyed by the lowered program).
 
+    JAX loads native programs from this folder, so it is used only when it belongs to the current user and neither
+    group nor others may write it (:func:`polyjax._files.trusted`); otherwise a warning names the folder and the
+    reason, and JAX's persistent cache stays off (programs are compiled afresh). A folder created here has mode
+    ``0700`` and polyjax's marker (:data:`polyjax._files.MARKER`): only a marked folder is ever trimmed or cleared,
+    and only of polyjax's and JAX's own entries (:mod:`polyjax.cli._cache`). The default folder, whose name is
+    polyjax's, is marked when found without the marker (made by an older polyjax).
+
     Args:
         path: the cache folder; default :func:`default_cache_dir` (``$POLYJAX_CACHE`` or
             ``$XDG_CACHE_HOME/polyjax/jax``). Created if missing.
 
     Returns:
-        The folder in use.
+        The folder in use (also when it may not be trusted: JAX's cache is then off).
 
     Raises:
         InputError: ``path`` exists and is not a folder, or cannot be created.
@@ -63,9 +71,15 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"cache folder {str(folder)!r}: exists and is not a folder")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        make_cache_folder(folder)
+        if path is None and folder == default_cache_dir() and untrusted_reason(folder) is None:
+            mark_cache_folder(folder)
     except OSError as e:
         raise InputError(f"cache folder {str(folder)!r}: cannot be created ({e.strerror or e})") from None
+    if not trusted(folder, what="JAX's persistent compilation cache"):
+        jax.config.update("jax_enable_compilation_cache", False)
+        return folder
+    _watch_use()
     jax.config.update("jax_enable_compilation_cache", True)  # in case a process turned JAX's cache off before
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -78,6 +92,34 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     except (ImportError, AttributeError):  # pragma: no cover - private API moved; the settings above still apply
         pass
     return folder
+
+
+_used = {"requests": 0, "writes": 0}
+_watching = False
+
+
+def _watch_use() -> None:
+    """Count the look-ups of JAX's persistent cache (idempotent): :func:`cache_used` then says whether any ran."""
+    global _watching
+    if not _watching:
+        def on_event(event: str, **_) -> None:
+            if event == "/jax/compilation_cache/compile_requests_use_cache":
+                _used["requests"] += 1
+
+        jax.monitoring.register_event_listener(on_event)
+        _watching = True
+
+
+def note_cache_write() -> None:
+    """Record that polyjax wrote into the cache folder (a saved program, a geometry): :func:`cache_used`."""
+    _used["writes"] += 1
+
+
+def cache_uses() -> int:
+    """How many times this process looked up JAX's persistent cache (after :func:`enable_compilation_cache`) or wrote
+    a polyjax entry into the cache folder: a run during which it did not grow never opened the cache, and has nothing
+    to trim."""
+    return _used["requests"] + _used["writes"]
 
 
 _counts = {"requests": 0, "answered": 0, "misses": 0}

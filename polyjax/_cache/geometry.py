@@ -30,7 +30,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .compilation import cache_disabled_by_env
+from .._files import make_cache_folder, trusted, write_bytes_atomically
+from .compilation import cache_disabled_by_env, note_cache_write
 
 #: subfolder of the compilation cache folder holding the geometries
 FOLDER = "polyjax-geometry"
@@ -48,7 +49,7 @@ def store_folder() -> Path | None:
     if os.environ.get(ENV, "").strip().lower() in _OFF or cache_disabled_by_env():
         return None
     folder = jax.config.jax_compilation_cache_dir
-    return Path(folder) / FOLDER if folder else None
+    return Path(folder) / FOLDER if folder and jax.config.jax_enable_compilation_cache else None
 
 
 def template(k: int, m: int, n_degrees: int, dtype) -> dict:
@@ -77,6 +78,8 @@ def load(folder: Path, key: str, template: dict) -> dict | None:
     """The kept geometry of ``key`` as numpy arrays, or None unless every check of the module docstring that can be
     made without the rows passes (``template``: the shapes and dtypes, :func:`template`)."""
     path = folder / f"geometry-{key}.npz"
+    if not path.is_file() or not trusted(folder, path, what="saved geometries"):
+        return None
     try:
         with np.load(path, allow_pickle=False) as f:
             arrays = {name: f[name] for name in FIELDS}
@@ -100,10 +103,8 @@ def save(folder: Path, key: str, geo: dict) -> None:
         arrays = {name: np.asarray(geo[name]) for name in FIELDS}
         buf = io.BytesIO()
         np.savez(buf, key=np.asarray(key), checksum=np.asarray(_checksum(arrays)), **arrays)
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"geometry-{key}.npz"
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(buf.getvalue())
-        os.replace(tmp, path)
+        make_cache_folder(folder, mark=False)
+        write_bytes_atomically(folder / f"geometry-{key}.npz", buf.getvalue(), mode=0o600)
+        note_cache_write()
     except OSError:  # a read-only or full disk: nothing kept
         pass

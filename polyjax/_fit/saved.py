@@ -14,7 +14,9 @@ that is the eager call's result too: data below :func:`polyjax._fit.stream.strea
 directions (an eager call raises on NaN where a traced one flags the lane). Options the fit refuses return None
 before any work (the ordinary call then raises its error); anything unexpected while saving or loading (a stale or
 unreadable file, a program that does not serialise) is logged once per file with its reason (logger ``polyjax``,
-level WARNING) and falls back to the ordinary call. ``POLYJAX_SAVED_PROGRAMS=off`` turns this off (the compilation
+level WARNING) and falls back to the ordinary call. The file is written and read by :mod:`polyjax._cache.programs`
+(no pickle; the executable's digest checked; nothing loaded from a folder or file that another user owns or others
+may write, warned once). ``POLYJAX_SAVED_PROGRAMS=off`` turns this off (the compilation
 cache alone then serves a warm run).
 """
 
@@ -22,14 +24,13 @@ from __future__ import annotations
 
 import logging
 import os
-import pickle
 from pathlib import Path
 
 import numpy as np
-from jax.experimental import serialize_executable
 
 from .._cache.compilation import compile_for_saving
 from .._cache.keys import program_key
+from .._cache.programs import load_program, save_program
 from .._errors import PolyjaxError
 from .._metrics import l2_error
 from .._model import PolynomialBRDF
@@ -64,13 +65,6 @@ def _program(options: dict):
     return run
 
 
-def _load_lapack() -> None:
-    """The LAPACK kernels are set up when a program using them is lowered; a loaded executable skips that step."""
-    from jaxlib.cpu import _lapack  # private jaxlib API: only a loaded executable needs it
-
-    _lapack.initialize()
-
-
 def _warn_once(what: str, path: Path, error: BaseException) -> None:
     """Log (once per process, kind of failure and file) why the saved program was not used; the caller then fits as
     usual."""
@@ -93,12 +87,9 @@ def _options(data, options: dict):
 
 def _load(path: Path):
     """The executable kept at ``path``, or None (a missing file; a stale or damaged one is logged)."""
-    if not path.is_file():
-        return None
     try:
-        payload, in_tree, out_tree = pickle.loads(path.read_bytes())
-        _load_lapack()
-        return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+        got = load_program(path)
+        return None if got is None else got[0]
     except Exception as e:  # noqa: BLE001 - a stale or damaged file: logged, compiled again
         _warn_once("reading the kept program failed", path, e)
         return None
@@ -107,10 +98,7 @@ def _load(path: Path):
 def _compile_and_keep(opts: dict, arrays, path: Path):
     call_opts = dict(opts, degree=list(opts["degree"]) if isinstance(opts["degree"], tuple) else opts["degree"])
     compiled = compile_for_saving(_program(call_opts), arrays, f"saved_{path.stem.replace('-', '_')}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_bytes(pickle.dumps(serialize_executable.serialize(compiled)))
-    os.replace(tmp, path)
+    save_program(path, compiled)
     return compiled
 
 

@@ -26,7 +26,9 @@ BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-sh
 ROOT_HELP = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
              "a folder given that does not exist is an error")
 CACHE_HELP = ("folder of JAX's persistent compilation cache, which lets later runs skip compiling (default: "
-              "$POLYJAX_CACHE, else $XDG_CACHE_HOME/polyjax/jax or ~/.cache/polyjax/jax)")
+              "$POLYJAX_CACHE, else $XDG_CACHE_HOME/polyjax/jax or ~/.cache/polyjax/jax); a folder polyjax creates "
+              "is its own (mode 0700, a marker file): only its own entries there are ever trimmed or cleared, and "
+              "nothing in a folder it did not create")
 NO_CACHE_HELP = "do not read or write the compilation cache (also: POLYJAX_CACHE=off)"
 
 

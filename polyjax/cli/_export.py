@@ -9,28 +9,33 @@ import polyjax as pj
 
 from .._config import check_output_file
 from .._errors import InputError
+from .._files import write_bytes_atomically
 from ..export._expr import program
 from ..export._glsl import brdf_explorer, glsl
 from ..export._merl import merl_binary
+from ..export._mitsuba_name import check_plugin_name
 from ..export._rgl import is_rgl_source, rgl_to_merl
 from ..render._brdf import rgb_brdf
 from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
 
 FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
 
-_MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of the polyjax model {model!r} (written by `polyjax export --to mitsuba`).
+#: the Mitsuba plugin file: user strings (the model's path, its lane, the plugin name) appear only as ``repr``
+#: literals in the three assignments below the docstring, never in the docstring or a comment
+_MITSUBA_SCRIPT = '''"""Mitsuba 3 BSDF plugin of a polyjax model (written by `polyjax export --to mitsuba`).
 
     import mitsuba as mi
     mi.set_variant("llvm_ad_rgb")        # or "scalar_rgb"
-    import {stem}
-    {stem}.register()                    # then {{"type": "{name}"}} in mi.load_dict / scene files
+    import <this file's name>
+    <this file's name>.register()        # then {{"type": NAME}} in mi.load_dict / scene files
 """
 
-MODEL = {model!r}
-INDEX = {index!r}
+MODEL = {model}
+INDEX = {index}
+NAME = {name}
 
 
-def register(name={name!r}):
+def register(name=NAME):
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -94,13 +99,15 @@ def run_export(args) -> int:
         return run_standard_export(args)
     src = Path(args.model)
     out = check_output_file(Path(args.out) if args.out else src.with_suffix(FORMATS[args.to]), "--out")
+    if args.to == "mitsuba":
+        check_plugin_name(args.name, "--name")
     model = pj.load_model(src)
     index = _lane_index(args.index, model.batch_shape)
     if index is not None:
         model = model[index]
     _check_one_brdf(model, index)
     if args.to == "glsl":
-        out.write_text(glsl(model))
+        write_bytes_atomically(out, glsl(model).encode())
     elif args.to == "brdf-explorer":
         brdf_explorer(model, out)
     elif args.to == "merl":
@@ -109,8 +116,8 @@ def run_export(args) -> int:
         if isinstance(model, pj.PolynomialBRDF):
             program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
         rgb_brdf(model)
-        out.write_text(_MITSUBA_SCRIPT.format(model=str(src.resolve()), index=index, name=args.name,
-                                              stem=out.stem))
+        text = _MITSUBA_SCRIPT.format(model=repr(str(src.resolve())), index=repr(index), name=repr(args.name))
+        write_bytes_atomically(out, text.encode())
     print(f"wrote {out} ({args.to})")
     return 0
 
@@ -120,7 +127,7 @@ def _run_rgl_export(args) -> int:
     if args.to != "merl":
         raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl' only, found {args.to!r}")
     name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
-    out = Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"])
+    out = check_output_file(Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"]), "--out")
     rgl_to_merl(name, out, root=getattr(args, "data_root", None))
     print(f"wrote {out} (merl, from the RGL-EPFL file {name})")
     return 0

@@ -22,6 +22,7 @@ import numpy as np
 import polyjax as pj
 
 from .. import export
+from .._files import check_output_path
 from .._io import fitter_for
 from ..export._mitsuba_choice import PLUGINS, TOLERANCE, fit_plugin
 
@@ -107,9 +108,7 @@ def run_standard_export(args) -> int:
     """Fit the target's standard model to ``args.model`` and write it (see the module docs)."""
     jax.config.update("jax_enable_x64", True)
     name, writer, suffix = TARGETS[args.to]
-    out = Path(args.out) if args.out else Path(Path(str(args.model)).stem + suffix)
-    if not out.parent.is_dir():
-        raise pj.InputError(f"--out: the folder {str(out.parent)!r} does not exist")
+    out = check_output_path(Path(args.out) if args.out else Path(Path(str(args.model)).stem + suffix), "--out")
     kind, model_name = fitter_for(name)
     data = _source(args)
     if args.to == "mitsuba-xml":  # the simplest Mitsuba plugin that fits as well as principled

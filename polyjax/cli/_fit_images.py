@@ -16,6 +16,7 @@ import polyjax as pj
 
 from .._config import check_model_file, check_output_dir
 from .._errors import InputError
+from .._files import inside_folder
 from ..render import Camera, DirectionalLight, Lambertian, Plane, PointLight, Scene, Sphere, load_envmap, read_exr
 from ..render._example_scene import write_example_scene
 from ._args import add_model_options, spec_from_args, strict_json
@@ -69,7 +70,7 @@ def load_scene_json(path: str | Path):
         raise InputError(f"{path}: 'images' must be a non-empty list")
     images = []
     for i, e in enumerate(entries):
-        f = base / _field(e, "file", f"{path}: images[{i}]", required=True)
+        f = inside_folder(base, _field(e, "file", f"{path}: images[{i}]", required=True), path, f"images[{i}].file")
         if not f.exists():
             raise InputError(f"{path}: images[{i}]: file {f} not found")
         images.append(read_exr(f))
@@ -110,7 +111,8 @@ def load_scene_json(path: str | Path):
                 elif kind == "directional":
                     lights.append(DirectionalLight(**args))
                 elif kind == "environment":
-                    lights.append(load_envmap(base / _field(args, "file", where, required=True),
+                    lights.append(load_envmap(inside_folder(base, _field(args, "file", where, required=True), path,
+                                                            f"images[{i}].lights[{j}].file"),
                                               float(args.get("scale", 1.0))))
                 else:
                     raise InputError(f"{where}: expected type 'point', 'directional' or 'environment', found {kind!r}")

@@ -13,7 +13,7 @@ import sys
 
 import jax
 
-from .._cache.compilation import cache_disabled_by_env, enable_compilation_cache
+from .._cache.compilation import cache_disabled_by_env, cache_uses, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
 from ._args import add_global_options
 from ._cache import cache_cap_bytes, trim_cache
@@ -58,10 +58,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _compilation_cache(args):
-    """Turn on the persistent compilation cache unless ``--no-cache`` or ``POLYJAX_CACHE=off``; its folder or None."""
+    """Turn on the persistent compilation cache unless ``--no-cache`` or ``POLYJAX_CACHE=off``; its folder, or None
+    (also when the folder may not be trusted: then nothing is loaded from it or written to it, and it is not
+    trimmed)."""
     if args.no_cache or (args.cache_dir is None and cache_disabled_by_env()):
         return None
-    return enable_compilation_cache(args.cache_dir)
+    folder = enable_compilation_cache(args.cache_dir)
+    return folder if jax.config.jax_enable_compilation_cache else None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,19 +75,22 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = _command_module(COMMANDS["report"]).cmd_report
+    uses, status = cache_uses(), 2
     try:
         args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        return status
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
-    finally:
-        _trim(getattr(args, "cache_in_use", None))
+    finally:  # a run that looked the cache up or wrote to it, or that ran to its end, opened it
+        _trim(getattr(args, "cache_in_use", None), cache_uses() > uses or status == 0)
 
 
-def _trim(folder) -> None:
-    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`)."""
-    if folder is None:
+def _trim(folder, opened: bool) -> None:
+    """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`): not after a run that
+    never opened it (``opened`` False: one that failed on its arguments, say)."""
+    if folder is None or not opened:
         return
     try:
         trim_cache(folder, cache_cap_bytes())

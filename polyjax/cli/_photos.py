@@ -19,6 +19,7 @@ import polyjax as pj
 
 from .._config import check_model_file, check_output_dir
 from .._errors import InputError
+from .._files import write_atomically
 from ..render._image import write_exr, write_png
 from ._args import add_model_options, spec_from_args
 
@@ -126,8 +127,11 @@ def write_png16(path: Path, image) -> None:
     """An ``(H, W, 3)`` image in ``[0, 1]`` as a 16-bit linear RGB PNG (the inputs' format)."""
     px = np.round(np.clip(np.asarray(image, np.float64), 0.0, 1.0) * 65535).astype(np.uint16)
     h, w, _ = px.shape
-    with open(path, "wb") as fh:
-        png.Writer(w, h, greyscale=False, bitdepth=16).write(fh, px.reshape(h, w * 3))
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            png.Writer(w, h, greyscale=False, bitdepth=16).write(fh, px.reshape(h, w * 3))
+
+    write_atomically(path, write)
 
 
 def run_relight(args) -> int:

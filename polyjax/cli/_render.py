@@ -97,6 +97,7 @@ def run_render(args) -> int:
     root = getattr(args, "data_root", None)
     out = Path(args.out)
     check_output_file(out.with_suffix(".exr"), "--out")
+    check_output_file(out.with_suffix(".png"), "--out")
     model_spec = spec_from_args(args, several=True, flag="--degrees")
     degrees = list(model_spec.degree) if isinstance(model_spec.degree, tuple) else [model_spec.degree]
     spec = args.dataset or ("curet:25" if configured_data_root(root) is not None else "synthetic")

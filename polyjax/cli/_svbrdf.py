@@ -17,6 +17,7 @@ from .. import svbrdf
 from .._basis import n_terms
 from .._config import check_output_dir
 from .._errors import InputError
+from .._files import write_npz_atomically
 from .._variables import get_variables
 from ..svbrdf import _distributed, photograph, relight, simulate_capture, write_texture_shards
 from ..svbrdf._capture import spread_cameras
@@ -125,8 +126,8 @@ def run_svbrdf(args) -> int:
     mine = local_part(model)
     image, ref = relight(mine, cap, light), photograph(materials, cap, light)
     sse, count, peak = float(jnp.sum((image - ref) ** 2)), int(image.size), float(jnp.max(ref))
-    np.savez(f"{args.out}/relit-rows-{cap.row0}-{cap.row0 + cap.positions.shape[0]}.npz",
-             relit=np.asarray(image), photograph=np.asarray(ref))
+    write_npz_atomically(f"{args.out}/relit-rows-{cap.row0}-{cap.row0 + cap.positions.shape[0]}.npz",
+                         relit=np.asarray(image), photograph=np.asarray(ref))
     if jax.process_count() > 1:
         parts = np.asarray(multihost_utils.process_allgather(np.array([sse, count, peak])))  # 3 scalars per process
         sse, count, peak = parts[:, 0].sum(), parts[:, 1].sum(), parts[:, 2].max()

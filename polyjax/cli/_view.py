@@ -14,7 +14,7 @@ import polyjax as pj
 from .._config import check_output_file, configured_data_root
 from .._errors import InputError
 from ..view._page import ViewSettings, write_page
-from ..view._serve import serve_page
+from ..view._serve import open_server, serve_page
 from ._args import add_image_options
 from ._photos import parse_lights
 
@@ -61,15 +61,13 @@ def add_view_parser(sub, parents=()) -> argparse.ArgumentParser:
 def run_view(args) -> int:
     out = check_output_file(args.out, "--out")
     lights = parse_lights(args.lights)
-    if args.serve and not 0 <= args.port <= 65535:  # checked before any work
-
-        raise InputError(f"--port: expected 0 (any free port) or a port in [1, 65535], found {args.port}")
+    server = open_server(args.port, "--port") if args.serve else None  # bound before any work: a busy port fails now
     settings = ViewSettings(size=args.size, exposure=args.exposure, environment=args.environment)
     write_page(args.items, out, settings=settings, resolution=_resolution(args.table_resolution),
                root=getattr(args, "data_root", None), lights=lights)
     print(f"wrote {out}", flush=True)
-    if args.serve:
-        serve_page(out, args.port)
+    if server is not None:
+        serve_page(out, args.port, server=server)
     return 0
 
 

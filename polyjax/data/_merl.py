@@ -58,6 +58,7 @@ import numpy as np
 
 from .._cache.memo import grid_memo, remember_content, remember_unit_directions
 from .._errors import DataNotFoundError, InputError
+from .._files import check_output_path, write_bytes_atomically
 from .._measurements import Measurements, lane_mask
 from ._errors import EmptyFileError, HeaderError, NonFiniteValueError, TruncatedFileError, WrongFormatError
 
@@ -407,11 +408,8 @@ def write_merl_binary(
     if scaled:
         vals = vals / np.asarray(MERL_SCALE)[:, None]
     vals = np.where(bad, -1.0, vals)
-    path = Path(path)
-    with open(path, "wb") as f:
-        f.write(np.asarray(res, dtype="<i4").tobytes())
-        f.write(vals.astype("<f8").tobytes())
-    return path
+    return write_bytes_atomically(check_output_path(path, "path"),
+                                  np.asarray(res, dtype="<i4").tobytes() + vals.astype("<f8").tobytes())
 
 
 def _choose_bins(valid: np.ndarray, subsample, seed: int, what: str) -> np.ndarray:

@@ -29,6 +29,7 @@ import numpy as np
 import png
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
+from .._files import inside_folder
 from ..inverse._capture import Capture
 
 #: the camera's white level: a 16-bit PNG value is divided by it (and 1.0 is a saturated pixel)
@@ -156,6 +157,8 @@ def _text_rows(path: str, cols: int | None) -> list:
 def _lights(folder: str, lights):
     """Names, directions ``(L, 3)`` and intensities ``(L, 3)`` of the lights kept (``lights``: 0-based indices)."""
     names = _text_rows(os.path.join(folder, "filenames.txt"), None)
+    for i, name in enumerate(names):
+        inside_folder(folder, name, os.path.join(folder, "filenames.txt"), f"line {i + 1}")
     d_path, e_path = os.path.join(folder, "light_directions.txt"), os.path.join(folder, "light_intensities.txt")
     dirs, ints = np.asarray(_text_rows(d_path, 3)), np.asarray(_text_rows(e_path, 3))
     for path, a in ((d_path, dirs), (e_path, ints)):

@@ -14,10 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import check_output_path, write_bytes_atomically
 from .._model import PolynomialBRDF
 from ..data._nbrdf import NeuralBRDF
 from ._expr import program
-from ._glsl_table import tabulated_glsl
+from ._glsl_table import check_function_name, comment_text, tabulated_glsl
 
 _HEADER = "// polyjax {what}: variables={variables}, basis={basis}, degree={degree}, interactions={interactions}"
 
@@ -34,16 +35,18 @@ def glsl(model, name: str = "BRDF") -> str:
     Returns:
         The source (GLSL 1.20 and later: scalar ``float`` arithmetic, ``sqrt``, ``max``).
     """
+    check_function_name(name)
     if not _has_program(model):  # baseline fits and other BRDFs: a table (polyjax/export/_glsl_table.py)
 
         return tabulated_glsl(model, name)
     prog = program(model)
     if hasattr(model, "variables"):
-        header = _HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
-                                degree=[int(d) for d in np.asarray(model.degree).ravel()],
-                                interactions=model.interactions)
+        header = comment_text(_HEADER.format(what="polynomial BRDF", variables=model.variables, basis=model.basis,
+                                             degree=[int(d) for d in np.asarray(model.degree).ravel()],
+                                             interactions=model.interactions)[3:])
+        header = f"// {header}"
     else:
-        header = f"// polyjax neural BRDF {getattr(model, 'name', '')} (Sztrajman et al. 2021)"
+        header = f"// polyjax neural BRDF {comment_text(getattr(model, 'name', ''))} (Sztrajman et al. 2021)"
     return (
         f"{header}\n"
         f"vec3 {name}(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)\n{{\n"
@@ -65,12 +68,11 @@ def brdf_explorer(model, path: str | os.PathLike) -> Path:
     The file holds an empty parameter block and the GLSL of :func:`glsl` between ``::begin shader`` and
     ``::end shader``. Returns the path written.
     """
+    path = check_output_path(path, "path")
     src = glsl(model)
     text = ("analytic\n\n# exported by polyjax\n\n::begin parameters\n::end parameters\n\n"
             f"::begin shader\n\n{src}\n::end shader\n")
-    path = Path(path)
-    path.write_text(text)
-    return path
+    return write_bytes_atomically(path, text.encode())
 
 
 def numpy_function(model):

@@ -12,13 +12,35 @@ model). An approximation at the table's resolution; the table is a ``const float
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
+from .._errors import InputError
 from ..render._brdf import rgb_brdf
 from ._merl import tabulate_merl
 
 #: the default table resolution (N_h, N_d, N_p): 8,192 nodes, 32,768 floats
 RESOLUTION = (16, 16, 32)
+#: what a generated file's comment may hold of a name that came from outside (a file's, a model's): anything else
+#: (a newline, a quote, ``*/``) becomes ``?``, so no name can end the comment and add code
+_COMMENT_SAFE = re.compile(r"[^A-Za-z0-9_ .,=()\[\]+-]")
+
+
+def comment_text(text) -> str:
+    """``str(text)`` with every character that could end a comment replaced by ``?`` (:data:`_COMMENT_SAFE`)."""
+    return _COMMENT_SAFE.sub("?", str(text))
+
+
+def check_function_name(name) -> str:
+    """``name`` when it is a GLSL identifier (letters, digits and ``_``, not starting with a digit).
+
+    Raises:
+        InputError: naming the name found.
+    """
+    if not (isinstance(name, str) and name.isascii() and name.isidentifier()):
+        raise InputError(f"name: expected a GLSL function name (letters, digits and _), found {name!r}")
+    return name
 
 _BODY = """
     vec3 u = normalize(vec3(dot(L, X), dot(L, Y), dot(L, N)));
@@ -72,10 +94,12 @@ def table(model, resolution=RESOLUTION) -> np.ndarray:
 
 def tabulated_glsl(model, name: str = "BRDF", resolution=RESOLUTION) -> str:
     """GLSL source of ``vec3 name(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` interpolating ``model``'s table."""
+    check_function_name(name)
     nh, nd, npd = (int(r) for r in resolution)
     t = table(model, resolution)
     data = ",".join(f"{x:.9g}" for x in t.ravel())
-    header = (f"// polyjax tabulated BRDF ({type(model).__name__} {getattr(model, 'name', '')}): max(f, 0) at "
+    header = (f"// polyjax tabulated BRDF ({comment_text(type(model).__name__)} "
+              f"{comment_text(getattr(model, 'name', ''))}): max(f, 0) at "
               f"{nh}x{nd}x{npd} Rusinkiewicz nodes, trilinear")
     return (f"{header}\nconst int NH = {nh};\nconst int ND = {nd};\nconst int NP = {npd};\n"
             f"const int NN = {nh * nd * npd};\nconst float TABLE[{t.size}] = float[{t.size}]({data});\n"

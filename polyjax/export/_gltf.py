@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import base64
 import json
-import os
 import struct
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import InputError
+from .._files import check_output_path, write_bytes_atomically
 from ._material import check_material, material_of
 
 _CORE = {"baseColorFactor": "rgb", "metallicFactor": "unit", "roughnessFactor": "unit"}
@@ -61,7 +61,7 @@ def gltf(material, path, *, sphere: bool = True, segments: int = 64, rings: int 
         if binary:
             doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
         data = json.dumps(doc, indent=1).encode()
-    _write_atomic(path, data)
+    write_bytes_atomically(path, data)
     return path
 
 
@@ -71,17 +71,9 @@ def _check_path(path, suffixes) -> Path:
         raise InputError(f"path: expected a file ending in {' or '.join(suffixes)}, found {str(path)!r}")
     if not path.parent.is_dir():
         raise InputError(f"path: the folder {str(path.parent)!r} does not exist")
-    return path
+    return check_output_path(path, "path")
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def _material_json(mat: dict, name: str) -> tuple[dict, list[str]]:

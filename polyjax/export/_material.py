@@ -5,12 +5,11 @@ they share."""
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
-from typing import Callable
 
 from .._config import check_output_file
 from .._errors import InputError
+from .._files import write_atomically  # noqa: F401 - the one writer (polyjax._files), also named here
 
 #: a value's kind: "unit" (a float in [0, 1]), "nonnegative" (>= 0), "ior" (>= 1), "positive" (> 0), "real" (any
 #: finite float), "rgb" (three floats in [0, 1]), "rgb+" (three floats >= 0)
@@ -109,19 +108,6 @@ def output_path(what: str, path, suffix: str) -> Path:
     if p.suffix.lower() != suffix:
         raise InputError(f"{what}: path {str(p)!r}: expected a {suffix} file name")
     return p
-
-
-def write_atomically(path: Path, write: Callable[[Path], None]) -> Path:
-    """``write(tmp)`` to a temporary file beside ``path`` (same suffix), then moved onto ``path``: a failed write
-    leaves no half-written file."""
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
 
 
 def format_float(x: float) -> str:

@@ -22,7 +22,8 @@ import os
 from pathlib import Path
 
 from .._errors import InputError
-from ._material import checked_inputs, format_float, output_path, write_atomically
+from .._files import write_atomically
+from ._material import checked_inputs, format_float, output_path
 
 _WHAT = "materialx"
 #: OpenPBR inputs written, with their ranges (``ND_open_pbr_surface_surfaceshader``'s ``uimin``/``uimax``).

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._files import check_output_path
 from ..data._merl import MERL_RESOLUTION, merl_grid, write_merl_binary
 from ..render._brdf import evaluate_rgb, rgb_brdf
 
@@ -63,6 +64,7 @@ def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) ->
     Returns:
         The path written. Not differentiable (file output); :func:`tabulate_merl` is.
     """
+    path = check_output_path(path, "path")
     vals, above = tabulate_merl(brdf, resolution)
     vals = np.asarray(vals, np.float64)  # max(f, 0) already: tabulate_merl evaluates through evaluate_rgb
     mask = np.broadcast_to(above, vals.shape) & np.isfinite(vals)

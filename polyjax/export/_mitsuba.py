@@ -34,6 +34,7 @@ from ..render._brdf import rgb_brdf
 from ..render._sampling import ImportanceSampler, importance_sampler
 from ._expr import program
 from ._merl import tabulate_merl
+from ._mitsuba_name import check_plugin_name
 
 
 def _mitsuba():
@@ -275,10 +276,12 @@ def register_mitsuba_bsdf(model, name: str = "polyjax", **sampler_options) -> st
     Args:
         model: a :class:`polyjax.PolynomialBRDF` (batch ``()``, ``(1,)`` or ``(3,)``), or any BRDF callable
             polyjax evaluates (tabulated on the MERL grid, see the module docstring).
-        name: the plugin name used in ``mi.load_dict({"type": name})`` and scene files.
+        name: the plugin name used in ``mi.load_dict({"type": name})`` and scene files: a Python identifier
+            (else :class:`polyjax.InputError`).
         sampler_options: passed to :func:`polyjax.render.importance_sampler` (``resolution``, ``n_views``,
             ``alpha``, ...).
     """
+    check_plugin_name(name)
     mi, dr = _mitsuba()
 
     if isinstance(model, (PolynomialBRDF, NeuralBRDF)):
@@ -294,6 +297,7 @@ def register_mitsuba_bsdf(model, name: str = "polyjax", **sampler_options) -> st
 def mitsuba_bsdf(model, name: str = "polyjax", **sampler_options):
     """A Mitsuba 3 BSDF evaluating and sampling ``model`` (registered as plugin ``name``, see
     :func:`register_mitsuba_bsdf`): ``mi.load_dict({"type": "sphere", "bsdf": pj.export.mitsuba_bsdf(fit)})``."""
+    check_plugin_name(name)
     mi, _ = _mitsuba()
     register_mitsuba_bsdf(model, name, **sampler_options)
     return mi.load_dict({"type": str(name)})

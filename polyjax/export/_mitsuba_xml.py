@@ -8,8 +8,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._errors import InputError
+from .._files import write_bytes_atomically
 from ..render._scene import DirectionalLight, PointLight, Sphere
-from ._gltf import _check_path, _write_atomic
+from ._gltf import _check_path
 from ._material import check_material, material_of
 
 _PRINCIPLED = {k: "unit" for k in ("roughness", "metallic", "specular", "spec_tint", "anisotropic", "sheen",
@@ -53,7 +54,7 @@ def mitsuba_xml(material, path, *, scene=None, material_id: str = "material"):
     bsdf = _bsdf_xml(mat, material_id, distribution)
     body = [bsdf] if scene is None else [bsdf] + _scene_xml(scene, material_id)
     text = '<?xml version="1.0" encoding="utf-8"?>\n<scene version="3.0.0">\n' + "\n".join(body) + "\n</scene>\n"
-    _write_atomic(path, text.encode())
+    write_bytes_atomically(path, text.encode())
     return path
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import InputError
+from .._files import check_output_path
 from ..data._merl import MERL_N_BINS, MERL_RESOLUTION, _above_index, write_merl_binary
 from ..data._rgl import load_rgl
 
@@ -35,6 +36,7 @@ def rgl_to_merl(source: str | os.PathLike, path: str | os.PathLike, *, root=None
     Raises:
         DataNotFoundError, DataFormatError: as :func:`polyjax.data.load_rgl`. InputError: a spectral file.
     """
+    path = check_output_path(path, "path")
     s = str(source)
     name = s[4:] if s.lower().startswith("rgl:") else s
     m = load_rgl(name, root=root)

@@ -18,7 +18,8 @@ import os
 from pathlib import Path
 
 from .._errors import InputError
-from ._material import checked_inputs, output_path, write_atomically
+from .._files import write_atomically
+from ._material import checked_inputs, output_path
 
 _WHAT = "usd"
 SCALARS = {"useSpecularWorkflow": (0.0, 1.0), "metallic": (0.0, 1.0), "roughness": (0.0, 1.0), "ior": (1.0, None),

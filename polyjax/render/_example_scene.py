@@ -14,6 +14,7 @@ from pathlib import Path
 
 import jax.numpy as jnp
 
+from .._files import write_bytes_atomically
 from ._brdf import Phong
 from ._image import write_exr
 from ._integrator import render
@@ -47,8 +48,7 @@ def write_example_scene(folder: str | os.PathLike, size: int = 64) -> Path:
     spec = {"camera": camera, "objects": [{"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1.0}],
             "target": 0, "images": entries}
     path = folder / "scene.json"
-    path.write_text(json.dumps(spec, indent=2) + "\n")
-    return path
+    return write_bytes_atomically(path, (json.dumps(spec, indent=2) + "\n").encode())
 
 
 __all__ = ["LIGHTS", "write_example_scene"]

@@ -13,6 +13,7 @@ from jaxtyping import ArrayLike
 from matplotlib.figure import Figure
 
 from .._errors import InputError
+from .._files import check_output_path, write_atomically
 from .._metrics import psnr
 from ._image import difference_images, to_srgb
 
@@ -28,6 +29,7 @@ def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Seq
     Returns:
         ``{name: psnr_dB}``.
     """
+    path = check_output_path(path, "path")
     if len(names) != len(images):
         raise InputError(f"names: expected {len(images)} names (one per image), found {len(names)}")
     ref_d = to_srgb(reference, exposure, tonemap)
@@ -48,7 +50,7 @@ def comparison_figure(path: str | os.PathLike, reference: ArrayLike, images: Seq
     for a in ax.ravel():
         a.set_axis_off()
     fig.tight_layout()
-    fig.savefig(str(path), dpi=100)
+    write_atomically(path, lambda tmp: fig.savefig(str(tmp), dpi=100))  # the format by the suffix, kept
     return scores
 
 

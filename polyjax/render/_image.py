@@ -13,6 +13,7 @@ import png
 from jaxtyping import ArrayLike
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
+from .._files import check_output_path, write_atomically
 
 
 def _as_rgb(image, name="image") -> np.ndarray:
@@ -31,11 +32,14 @@ def write_exr(path: str | os.PathLike, image: ArrayLike) -> Path:
         The path written.
     """
     rgb = np.ascontiguousarray(_as_rgb(image), dtype=np.float32)
-    path = Path(path)
+    path = check_output_path(path, "path")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, {"RGB": rgb}) as f:
-        f.write(str(path))
-    return path
+
+    def write(tmp: Path) -> None:
+        with OpenEXR.File(header, {"RGB": rgb}) as f:
+            f.write(str(tmp))
+
+    return write_atomically(path, write)
 
 
 def read_exr(path: str | os.PathLike) -> np.ndarray:
@@ -84,12 +88,15 @@ def write_png(path: str | os.PathLike, image: ArrayLike, exposure: float = 0.0, 
               srgb: bool = True) -> Path:
     """Write a preview PNG: tone-mapped sRGB (``srgb=True``) or an image already in ``[0, 1]`` display values."""
     disp = to_srgb(image, exposure, tonemap) if srgb else np.clip(_as_rgb(image), 0.0, 1.0)
-    path = Path(path)
+    path = check_output_path(path, "path")
     rows = np.round(disp * 255).astype(np.uint8)
     h, w, _ = rows.shape
-    with open(path, "wb") as fh:
-        png.Writer(w, h, greyscale=False, bitdepth=8).write(fh, rows.reshape(h, w * 3))
-    return path
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            png.Writer(w, h, greyscale=False, bitdepth=8).write(fh, rows.reshape(h, w * 3))
+
+    return write_atomically(path, write)
 
 
 def difference_images(images: Sequence[ArrayLike], reference: ArrayLike, scale: float | None = None

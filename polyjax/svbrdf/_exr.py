@@ -31,6 +31,7 @@ import numpy as np
 import OpenEXR
 
 from .._errors import DataFormatError, InputError
+from .._files import write_atomically
 
 PRECISIONS = ("hi-lo", "float32")
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -99,8 +100,12 @@ def write_exr_shard(path: str | os.PathLike, fields: dict[str, np.ndarray], layo
         channels.update(_encode(name, np.asarray(a), layouts[name]))
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "polyjaxRows": f"{rows[0]} {rows[1]}"}
-    with OpenEXR.File(header, channels) as f:
-        f.write(str(path))
+
+    def write(tmp) -> None:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+
+    write_atomically(path, write)
 
 
 def read_exr_shard(path: str | os.PathLike, fields: dict[str, dict], rows: int) -> dict[str, np.ndarray]:

@@ -22,6 +22,7 @@ import numpy as np
 
 from .._arrays import device_array
 from .._errors import DataFormatError, DataNotFoundError, InputError
+from .._files import inside_folder, write_bytes_atomically, write_npz_atomically
 from .._model import PolynomialBRDF
 from ._exr import channel_layout, read_exr_shard, write_exr_shard
 
@@ -109,7 +110,7 @@ def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *,
     for start, stop in sorted(r for r, p in shards.items() if p == jax.process_index()):
         parts = _local_rows(model, start, stop)
         if "npz" in formats:
-            np.savez(out / name(start, stop, "npz"), row_start=row0 + start, row_stop=row0 + stop, **parts)
+            write_npz_atomically(out / name(start, stop, "npz"), row_start=row0 + start, row_stop=row0 + stop, **parts)
         if "exr" in formats:
             write_exr_shard(out / name(start, stop, "exr"), parts, {n: fields[n]["exr"] for n in _FIELDS},
                             (row0 + start, row0 + stop))
@@ -125,7 +126,7 @@ def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *,
                          files={f: name(a, b, f) for f in formats}, process=p) for (a, b), p in sorted(shards.items())],
             processes=jax.process_count(),
         )
-        manifest.write_text(json.dumps(meta, indent=1))
+        write_bytes_atomically(manifest, json.dumps(meta, indent=1).encode())  # last: the shards are complete
     return manifest
 
 
@@ -171,7 +172,7 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
         a, b = shard["rows"]
         if b <= lo or a >= hi:
             continue
-        f = d / shard.get("files", {"npz": shard["file"]})[fmt]
+        f = inside_folder(d, shard.get("files", {"npz": shard["file"]})[fmt], d / MANIFEST, f"shard rows {a}-{b}")
         if not f.is_file():
             raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(d / MANIFEST)!r}; it is "
                                     "missing")

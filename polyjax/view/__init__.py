@@ -27,9 +27,9 @@ from ._items import (
 )
 from ._page import ViewSettings, page_html, write_page
 from ._rgl import rgl_items
-from ._serve import serve_page
+from ._serve import open_server, serve_page
 from ._sources import as_items, items_from_argument
 
 __all__ = ["DENSE_FRACTION", "MAX_PHOTO_SIZE", "MAX_SAMPLES", "MERL_RESOLUTION", "ViewItem", "ViewSettings", "as_items",
            "capture_items", "data_items", "environment_map", "fit_time", "items_from_argument", "model_items",
-           "page_html", "rgl_items", "serve_page", "write_page"]
+           "open_server", "page_html", "rgl_items", "serve_page", "write_page"]

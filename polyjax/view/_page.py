@@ -24,6 +24,7 @@ import numpy as np
 
 from .._config import check_output_file
 from .._errors import InputError
+from .._files import write_bytes_atomically
 from ._capture import capture_json
 from ._environment import environment_json
 from ._glsl import brdf_functions
@@ -126,5 +127,4 @@ def write_page(objects, path: str | os.PathLike, *, settings: ViewSettings = Vie
     path = check_output_file(path, "out")
     _check_settings(settings)  # before the items' work
     text = page_html(as_items(objects, resolution, root, lights), settings)
-    path.write_text(text, encoding="utf-8")
-    return path
+    return write_bytes_atomically(path, text.encode("utf-8"))
