@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import tokenize
 import zipfile
 import zlib
 
@@ -44,14 +45,14 @@ def checked_size(path, limit: int | None = None, what: str = "a file") -> int:
 def read_bytes(path, limit: int | None = None, what: str = "a file") -> bytes:
     """The bytes of ``path``, read after :func:`checked_size` (and never more than the cap if it grows)."""
     limit = input_limit() if limit is None else limit
-    checked_size(path, limit, what)
+    size = checked_size(path, limit, what)
     try:
-        with open(path, "rb") as fh:
-            data = fh.read(limit + 1)
+        with open(path, "rb") as fh:  # read(n) allocates n bytes first: the size on disk, not the cap
+            data = fh.read(min(size, limit) + 1)
     except OSError as e:
         raise DataFormatError(path, f"{what} that can be read", f"{e.strerror or e}") from None
-    if len(data) > limit:
-        raise DataFormatError(path, f"{what} of at most {describe(limit)} (the cap {LIMIT_ENV})", "a file that grew")
+    if len(data) > min(size, limit):
+        raise DataFormatError(path, f"{what} of {size} bytes, as when its size was read", "a file that grew")
     return data
 
 
@@ -114,7 +115,8 @@ def _npy_header(fh, path, name: str, kinds: str) -> tuple[tuple[int, ...], bool,
             shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
         else:
             raise ValueError(f"unsupported .npy version {version}")
-    except (ValueError, TypeError, SyntaxError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+    except (ValueError, TypeError, SyntaxError, tokenize.TokenError, RecursionError, MemoryError, OSError, EOFError,
+            zipfile.BadZipFile, zlib.error) as e:  # numpy parses the header as Python text: its errors are these
         raise DataFormatError(path, f"an .npy header in member {name!r}", f"{type(e).__name__}: {e}") from None
     if dtype.kind not in kinds or dtype.hasobject or dtype.subdtype is not None:
         raise DataFormatError(path, f"a numeric array in member {name!r}", f"dtype {dtype.str}")

@@ -236,7 +236,7 @@ def _parse_weights(blob: bytes, path: Path, member: str) -> tuple[np.ndarray, ..
             return _layer_weights(f, path, member)
     except PolyjaxError:
         raise
-    except (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError) as e:
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError, OverflowError) as e:
         raise WrongFormatError(path, f"an HDF5 file in {member!r}", f"unreadable content ({e})") from None
 
 
@@ -330,7 +330,7 @@ def load_nbrdf(
             wanted = [nets.resolve(n) for n in names]
             if not wanted:
                 raise InputError("names: expected at least one material name (or None for all)")
-        out = {n: NeuralBRDF(*(jnp.asarray(a) for a in nets.read(n)), name=n) for n in wanted}
+        out = {n: NeuralBRDF(*(device_array(a) for a in nets.read(n)), name=n) for n in wanted}
     return out[wanted[0]] if single else out
 
 
