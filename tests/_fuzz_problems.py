@@ -24,11 +24,12 @@ from typing import Callable
 import h5py
 import numpy as np
 import scipy.io
-from _data_problems import write_astm, write_small_merl
-from _rgl_problems import rgl_fields, write_tensor_file
 from hypothesis import strategies as st
 
 import polyjax as pj
+
+from _data_problems import write_astm, write_small_merl
+from _rgl_problems import rgl_fields, write_tensor_file
 
 #: a load of these small files must allocate less than this (Python objects and numpy arrays, tracemalloc)
 MEMORY_CAP = 64 * 2**20

@@ -12,11 +12,12 @@ from __future__ import annotations
 from collections import Counter
 
 import pytest
-from _fuzz_problems import MEMORY_CAP, PROBLEMS, peak_bytes
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import polyjax as pj
+
+from _fuzz_problems import MEMORY_CAP, PROBLEMS, peak_bytes
 
 DEFAULT_EXAMPLES = 12
 SLOW_EXAMPLES = 400

@@ -60,8 +60,8 @@ def check_polynomial_fields(path, static: dict, arrays: dict) -> None:
     batch = tuple(np.shape(arrays["degree"]))
     k = int(np.shape(arrays["mean"])[-1]) if np.ndim(arrays["mean"]) == len(batch) + 1 else -1
     m = n_terms(max(k, 0), static["max_degree"], bool(static.get("interactions", False)))
-    want = {"coefficients": batch + (m,), "mean": batch + (k,), "centre": batch + (k,), "halfwidth": batch + (k,),
-            "rotation": batch + (k, k), **{n: batch for n in ("l2", "rank", "condition", "n_used", "status")}}
+    want = {"mean": batch + (k,), "centre": batch + (k,), "halfwidth": batch + (k,), "rotation": batch + (k, k),
+            "coefficients": batch + (m,), **{n: batch for n in ("l2", "rank", "condition", "n_used", "status")}}
     for name, shape in want.items():
         if tuple(np.shape(arrays[name])) != shape or k < 1:
             raise DataFormatError(path, f"array {name!r} of shape {shape} (batch {batch} of degree's, k = {k} of "

@@ -195,6 +195,9 @@ def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians"
             elif _starts_with_number(s):
                 raise HeaderError(path, "a 'VARS ...' line naming the columns before the data",
                                   f"data on line {no} first")
+            elif not s.replace(",", " ").split():
+                raise HeaderError(path, "header lines of a keyword and its values (NAME, NUM_POINTS, VARS ...)",
+                                  f"the line {s!r} (line {no})")
             continue
         toks = [t for t in re.split(r"[,\s]+", s) if t]
         if len(toks) != len(names):

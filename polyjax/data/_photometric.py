@@ -13,15 +13,18 @@ CVPR 2016 / TPAMI 2019) stores each object in a folder ``pmsData/<object>PNG/``:
 - the camera is orthographic and looks along ``-z`` of that frame: the view direction is ``(0, 0, 1)`` everywhere.
 
 16-bit PNGs are read by pypng (Pillow would truncate them to 8 bits), the ``.mat`` file by :func:`read_mat_array`
-(``scipy.io.loadmat``). Every file is checked before any array reaches JAX, and its declared size before it is read:
-a PNG's dimensions and a MATLAB variable's shape against the input cap (``POLYJAX_MAX_INPUT_MB``) and against what
-its compressed bytes can hold (deflate inflates at most 1032-fold), the text files' sizes against the cap. A bad
+(``scipy.io.loadmat``). Every file is checked before any array reaches JAX, and its declared sizes before it is read:
+a PNG's dimensions against the input cap (``POLYJAX_MAX_INPUT_MB``) and against what its compressed bytes can hold
+(deflate inflates at most 1032-fold); a MAT-file's elements against its size, each compressed element's inflated
+size (counted in chunks) and the variable's shape against the cap; the text files' sizes against the cap. A bad
 file raises :class:`polyjax.DataFormatError` (or :class:`polyjax.DataNotFoundError`) naming it.
 """
 
 from __future__ import annotations
 
+import io
 import os
+import struct
 import zlib
 from typing import Sequence
 
@@ -30,7 +33,7 @@ import png
 import scipy.io
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
-from .._reading.bounded import checked_size, read_text
+from .._reading.bounded import checked_size, read_bytes, read_text
 from .._reading.limits import LIMIT_ENV, MAX_DEFLATE_RATIO, describe, input_limit
 from ..inverse._capture import Capture
 
@@ -100,34 +103,63 @@ def check_png_header(path: str, bits: int, shape: tuple[int, int], planes: int) 
                               f"{found[1]} channels of {found[2][1]} x {found[2][0]}")
 
 
-def _mat_shapes(path: str) -> dict:
+def _mat_shapes(path: str, raw: bytes) -> dict:
     """``{name: (shape, class)}`` of the variables of a MAT-file, from their headers (``scipy.io.whosmat``)."""
     try:
-        return {name: (tuple(int(d) for d in shape), cls) for name, shape, cls in scipy.io.whosmat(path)}
+        return {name: (tuple(int(d) for d in shape), cls) for name, shape, cls in scipy.io.whosmat(io.BytesIO(raw))}
     except MemoryError:
         raise
     except Exception as e:  # noqa: BLE001  (scipy's parser raises many kinds on a damaged file: each is named here)
         raise DataFormatError(path, "a readable MATLAB 5 MAT-file", f"{type(e).__name__}: {e}") from None
 
 
+def _mat_inflated(path: str, raw: bytes, limit: int) -> None:
+    """Walk the top-level elements of a MAT-file (8-byte tags: type, byte count) and inflate each compressed one
+    in chunks that are counted and dropped: an element running past the end of the file, or one inflating to more
+    than ``limit`` bytes, is a DataFormatError naming the file, before scipy reads anything."""
+    if len(raw) < 128 or raw[126:128] not in (b"IM", b"MI"):
+        raise DataFormatError(path, "a MATLAB 5.0 MAT-file header (128 bytes)", repr(raw[:20]))
+    end, pos = ("<" if raw[126:128] == b"IM" else ">"), 128
+    while pos + 8 <= len(raw):
+        kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
+        if kind >> 16:  # a small element: its data in the tag's second half
+            pos += 8
+            continue
+        if pos + 8 + size > len(raw):
+            raise DataFormatError(path, f"an element of {size} bytes at byte {pos}", f"a file of {len(raw)} bytes")
+        if kind == 15:  # miCOMPRESSED
+            inflater, total, rest = zlib.decompressobj(), 0, raw[pos + 8:pos + 8 + size]
+            try:
+                while rest and total <= limit:
+                    total += len(inflater.decompress(rest, 2**20))
+                    rest = inflater.unconsumed_tail
+            except zlib.error as e:
+                raise DataFormatError(path, f"a compressed element at byte {pos} that inflates", f"{e}") from None
+            if total > limit:
+                raise DataFormatError(path, f"elements of at most {describe(limit)} inflated (the cap {LIMIT_ENV})",
+                                      f"the element at byte {pos} inflating past it")
+        pos += 8 + size + (-size % 8 if kind != 15 else 0)
+
+
 def read_mat_array(path: str, name: str) -> np.ndarray:
     """The real numeric array ``name`` of a MATLAB v5 ``.mat`` file, as float64 in C order, read by
-    ``scipy.io.loadmat``. The file's size and the variable's declared shape are checked first: its float64 values
-    within the input cap (``POLYJAX_MAX_INPUT_MB``) and within what the file's bytes can inflate to. Raises
-    :class:`polyjax.DataFormatError` naming the file for anything else (v7.3/HDF5 files, complex data, structs,
-    damaged elements)."""
-    size = checked_size(path, None, "a MATLAB MAT-file")
-    shapes = _mat_shapes(path)
+    ``scipy.io.loadmat``. Sizes are checked first: the file's against the input cap (``POLYJAX_MAX_INPUT_MB``),
+    every element's byte count against the file's size, what each compressed element inflates to (counted in
+    chunks, never held) and the variable's declared shape against the cap. Raises :class:`polyjax.DataFormatError`
+    naming the file for anything else (v7.3/HDF5 files, complex data, structs, damaged elements)."""
+    limit = input_limit()
+    raw = read_bytes(path, limit, "a MATLAB MAT-file")
+    _mat_inflated(path, raw, limit)
+    shapes = _mat_shapes(path, raw)
     if name not in shapes:
         raise DataFormatError(path, f"a variable {name!r}", f"{sorted(shapes)}")
     shape, cls = shapes[name]
-    nbytes, most = 8 * int(np.prod(shape, dtype=object)), min(input_limit(), MAX_DEFLATE_RATIO * size + 1024)
-    if nbytes > most:
-        raise DataFormatError(path, f"variable {name!r} of at most {describe(most)} (the cap {LIMIT_ENV}, and "
-                              f"deflate's largest ratio to the file's {size} bytes)",
-                              f"the shape {shape} ({describe(nbytes)})")
+    nbytes = 8 * int(np.prod(shape, dtype=object))
+    if nbytes > limit:
+        raise DataFormatError(path, f"variable {name!r} of at most {describe(limit)} as float64 (the cap "
+                              f"{LIMIT_ENV})", f"the shape {shape} ({describe(nbytes)})")
     try:
-        arr = scipy.io.loadmat(path, variable_names=[name], squeeze_me=False)[name]
+        arr = scipy.io.loadmat(io.BytesIO(raw), variable_names=[name], squeeze_me=False)[name]
     except MemoryError:
         raise
     except Exception as e:  # noqa: BLE001  (scipy's parser raises many kinds on a damaged file: each is named here)
