@@ -44,13 +44,23 @@ PNG16_MAX = 65535.0
 _PNG_ERRORS = (png.Error, ValueError, OSError, EOFError, zlib.error, IndexError, TypeError, AssertionError)
 
 
-def _png_reader(fh, path: str) -> png.Reader:
-    """A pypng reader of the open file ``fh`` past its header, its dimensions checked: the decoded pixels
-    (2 bytes a value) within the input cap, and the rows' bytes within what the file's size can inflate to."""
+def _png_reader(path: str, header_only: bool = False) -> png.Reader:
+    """A pypng reader of the PNG ``path`` past its header, its dimensions checked: the decoded pixels (2 bytes a
+    value) within the input cap, and the rows' bytes within what the file's size can inflate to. The file is read
+    first (within the cap; its first 64 KiB when ``header_only`` and the header lies there): pypng then reads its
+    chunks from memory, so a damaged chunk length never makes it allocate more than the file holds."""
     size = checked_size(path, None, "a PNG file")
     try:
-        r = png.Reader(file=fh)
-        r.preamble()
+        if header_only and size > 2**16:
+            try:
+                with open(path, "rb") as fh:
+                    r = png.Reader(bytes=fh.read(2**16))
+                r.preamble()
+            except _PNG_ERRORS:  # chunks before the pixels longer than 64 KiB: read it all
+                header_only = False
+        if not header_only or size <= 2**16:
+            r = png.Reader(bytes=read_bytes(path, None, "a PNG file"))
+            r.preamble()
         h, w, planes, bits = int(r.height), int(r.width), int(r.planes), int(r.bitdepth)
     except _PNG_ERRORS as e:
         raise DataFormatError(path, "a readable PNG file", f"{e}") from None
@@ -70,13 +80,12 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
     :class:`polyjax.DataFormatError` naming the file when it is not a PNG, has another depth, or declares more
     pixels than the input cap (``POLYJAX_MAX_INPUT_MB``) or its size can hold (checked before any pixel is
     decoded)."""
+    r = _png_reader(path)
+    if bits is not None and int(r.bitdepth) != bits:
+        raise DataFormatError(path, f"a {bits}-bit PNG", f"{r.bitdepth} bits per channel")
     try:
-        with open(path, "rb") as fh:
-            r = _png_reader(fh, path)
-            if bits is not None and int(r.bitdepth) != bits:
-                raise DataFormatError(path, f"a {bits}-bit PNG", f"{r.bitdepth} bits per channel")
-            w, h, rows, info = r.asDirect()
-            data = np.array([np.asarray(r, dtype=np.uint16) for r in rows])
+        w, h, rows, info = r.asDirect()
+        data = np.array([np.asarray(r, dtype=np.uint16) for r in rows])
     except _PNG_ERRORS as e:
         raise DataFormatError(path, "a readable PNG file", f"{e}") from None
     if bits is not None and info["bitdepth"] != bits:
@@ -90,12 +99,8 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
 def check_png_header(path: str, bits: int, shape: tuple[int, int], planes: int) -> None:
     """Check a PNG's header (no pixel is decoded): ``bits`` per channel, ``planes`` channels, ``shape = (H, W)``.
     Raises :class:`polyjax.DataFormatError` naming the file otherwise."""
-    try:
-        with open(path, "rb") as fh:
-            r = _png_reader(fh, path)
-            found = (int(r.bitdepth), int(r.planes), (int(r.height), int(r.width)))
-    except _PNG_ERRORS as e:
-        raise DataFormatError(path, "a readable PNG file", f"{e}") from None
+    r = _png_reader(path, header_only=True)
+    found = (int(r.bitdepth), int(r.planes), (int(r.height), int(r.width)))
     if found[0] != bits:
         raise DataFormatError(path, f"a {bits}-bit PNG (linear camera values)", f"{found[0]} bits per channel")
     if found[1:] != (planes, tuple(shape)):
@@ -113,13 +118,14 @@ def _mat_shapes(path: str, raw: bytes) -> dict:
         raise DataFormatError(path, "a readable MATLAB 5 MAT-file", f"{type(e).__name__}: {e}") from None
 
 
-def _mat_inflated(path: str, raw: bytes, limit: int) -> None:
+def _mat_inflated(path: str, raw: bytes, limit: int) -> int:
     """Walk the top-level elements of a MAT-file (8-byte tags: type, byte count) and inflate each compressed one
     in chunks that are counted and dropped: an element running past the end of the file, or one inflating to more
-    than ``limit`` bytes, is a DataFormatError naming the file, before scipy reads anything."""
-    if len(raw) < 128 or raw[126:128] not in (b"IM", b"MI"):
+    than ``limit`` bytes, is a DataFormatError naming the file, before scipy reads anything. Returns the bytes the
+    elements hold (inflated). Only MAT-files of version 5 are read (scipy would read other headers as version 4)."""
+    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
         raise DataFormatError(path, "a MATLAB 5.0 MAT-file header (128 bytes)", repr(raw[:20]))
-    end, pos = ("<" if raw[126:128] == b"IM" else ">"), 128
+    end, pos, held = ("<" if raw[126:128] == b"IM" else ">"), 128, 0
     while pos + 8 <= len(raw):
         kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
         if kind >> 16:  # a small element: its data in the tag's second half
@@ -138,7 +144,9 @@ def _mat_inflated(path: str, raw: bytes, limit: int) -> None:
             if total > limit:
                 raise DataFormatError(path, f"elements of at most {describe(limit)} inflated (the cap {LIMIT_ENV})",
                                       f"the element at byte {pos} inflating past it")
+        held += total if kind == 15 else size
         pos += 8 + size + (-size % 8 if kind != 15 else 0)
+    return held
 
 
 def read_mat_array(path: str, name: str) -> np.ndarray:
@@ -149,15 +157,16 @@ def read_mat_array(path: str, name: str) -> np.ndarray:
     naming the file for anything else (v7.3/HDF5 files, complex data, structs, damaged elements)."""
     limit = input_limit()
     raw = read_bytes(path, limit, "a MATLAB MAT-file")
-    _mat_inflated(path, raw, limit)
+    held = _mat_inflated(path, raw, limit)
     shapes = _mat_shapes(path, raw)
     if name not in shapes:
         raise DataFormatError(path, f"a variable {name!r}", f"{sorted(shapes)}")
     shape, cls = shapes[name]
-    nbytes = 8 * int(np.prod(shape, dtype=object))
-    if nbytes > limit:
+    count = int(np.prod(shape, dtype=object))
+    if 8 * count > limit or count > held:
         raise DataFormatError(path, f"variable {name!r} of at most {describe(limit)} as float64 (the cap "
-                              f"{LIMIT_ENV})", f"the shape {shape} ({describe(nbytes)})")
+                              f"{LIMIT_ENV}) and at most one value a byte its elements hold ({held})",
+                              f"the shape {shape} ({describe(8 * count)})")
     try:
         arr = scipy.io.loadmat(io.BytesIO(raw), variable_names=[name], squeeze_me=False)[name]
     except MemoryError:
