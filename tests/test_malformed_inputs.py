@@ -67,7 +67,7 @@ def test_mat_normals_inflating_past_the_cap_are_refused_before_inflating(tmp_pat
     out, peak = peak_bytes(pj.data.read_mat_array, str(path), "Normal_gt")
     assert isinstance(out, pj.DataFormatError), out
     assert "Normal_gt.mat" in str(out) and "POLYJAX_MAX_INPUT_MB" in str(out) and "inflating past it" in str(out)
-    assert peak < 4 * MiB  # the array inflates to 24 MiB
+    assert peak < 8 * MiB  # the array inflates to 24 MiB
 
 
 def test_mask_png_declaring_more_pixels_than_the_cap_is_refused_before_decoding(tmp_path, monkeypatch):

@@ -65,21 +65,23 @@ def read_text(path, limit: int | None = None, what: str = "a text file") -> str:
         raise DataFormatError(path, what, f"bytes that are not UTF-8 text (byte {e.start})") from None
 
 
-def _check_declared(path, name: str, declared: int, stored: int, limit: int) -> None:
+def _check_declared(path, name: str, declared: int, stored: int, limit: int, cap: str = LIMIT_ENV) -> None:
     where = f"member {name!r}"
     if declared > limit:
-        raise DataFormatError(path, f"{where} of at most {describe(limit)} inflated (the cap)",
+        raise DataFormatError(path, f"{where} of at most {describe(limit)} inflated (the cap {cap})",
                               f"a declared size of {describe(declared)}")
     if declared > MAX_DEFLATE_RATIO * stored + 64:
         raise DataFormatError(path, f"{where} of at most {MAX_DEFLATE_RATIO} times its {stored} stored bytes "
                               "(deflate's largest ratio)", f"a declared size of {describe(declared)}")
 
 
-def read_zip_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path, limit: int | None = None) -> bytes:
+def read_zip_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path, limit: int | None = None,
+                    cap: str = LIMIT_ENV) -> bytes:
     """The inflated bytes of ``info`` in ``zf`` (the archive ``path``): its declared size checked against ``limit``
-    (default :func:`input_limit`) and deflate's ratio, then read in chunks, never past the declared size."""
+    (default :func:`input_limit`; ``cap`` says where it is set) and deflate's ratio, then read in chunks, never past
+    the declared size."""
     limit = input_limit() if limit is None else limit
-    _check_declared(path, info.filename, info.file_size, info.compress_size, limit)
+    _check_declared(path, info.filename, info.file_size, info.compress_size, limit, cap)
     out = bytearray()
     try:
         with zf.open(info) as fh:

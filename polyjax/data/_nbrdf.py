@@ -41,7 +41,7 @@ from .._config import data_file
 from .._errors import DataNotFoundError, InputError, PolyjaxError
 from .._measurements import Measurements
 from .._reading.bounded import open_zip, read_bytes, read_zip_member
-from .._reading.limits import network_limit
+from .._reading.limits import LIMIT_ENV, network_limit
 from ._errors import HeaderError, NonFiniteValueError, UnknownMaterialError, WrongFormatError
 from ._merl import MERL_NAMES, MERL_RESOLUTION, TABLE3_MATERIALS, _choose_bins, merl_bin_angles, merl_grid
 
@@ -218,7 +218,8 @@ class _NetworkSet:
         :func:`polyjax._reading.limits.network_limit`, and inflated in bounded chunks."""
         member = self.members[name]
         if self.zip is not None:
-            blob = read_zip_member(self.zip, self.infos[member], self.path, network_limit())
+            blob = read_zip_member(self.zip, self.infos[member], self.path, network_limit(),
+                                   f"of one network, 16 MiB or {LIMIT_ENV}")
         else:
             blob = read_bytes(self.path / member, network_limit(), "a Keras .h5 network")
         return _parse_weights(blob, self.path, member)

@@ -15,8 +15,9 @@ CVPR 2016 / TPAMI 2019) stores each object in a folder ``pmsData/<object>PNG/``:
 16-bit PNGs are read by pypng (Pillow would truncate them to 8 bits), the ``.mat`` file by :func:`read_mat_array`
 (``scipy.io.loadmat``). Every file is checked before any array reaches JAX, and its declared sizes before it is read:
 a PNG's dimensions against the input cap (``POLYJAX_MAX_INPUT_MB``) and against what its compressed bytes can hold
-(deflate inflates at most 1032-fold); a MAT-file's elements against its size, each compressed element's inflated
-size (counted in chunks) and the variable's shape against the cap; the text files' sizes against the cap. A bad
+(deflate inflates at most 1032-fold); a MAT-file's compressed elements inflated in chunks within the cap, every
+element's byte count against what holds it, and the variable's shape against the cap; the text files' sizes against
+the cap. A bad
 file raises :class:`polyjax.DataFormatError` (or :class:`polyjax.DataNotFoundError`) naming it.
 """
 
@@ -118,46 +119,71 @@ def _mat_shapes(path: str, raw: bytes) -> dict:
         raise DataFormatError(path, "a readable MATLAB 5 MAT-file", f"{type(e).__name__}: {e}") from None
 
 
-def _mat_inflated(path: str, raw: bytes, limit: int) -> int:
-    """Walk the top-level elements of a MAT-file (8-byte tags: type, byte count) and inflate each compressed one
-    in chunks that are counted and dropped: an element running past the end of the file, or one inflating to more
-    than ``limit`` bytes, is a DataFormatError naming the file, before scipy reads anything. Returns the bytes the
-    elements hold (inflated). Only MAT-files of version 5 are read (scipy would read other headers as version 4)."""
-    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
-        raise DataFormatError(path, "a MATLAB 5.0 MAT-file header (128 bytes)", repr(raw[:20]))
-    end, pos, held = ("<" if raw[126:128] == b"IM" else ">"), 128, 0
-    while pos + 8 <= len(raw):
-        kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
-        if kind >> 16:  # a small element: its data in the tag's second half
+def _mat_elements(path: str, data: bytes, start: int, stop: int, end: str, depth: int = 0) -> None:
+    """Check that every element tagged in ``data[start:stop]`` (and every element nested in a matrix, to depth 16)
+    lies inside it: a byte count running past its parent is a DataFormatError naming the file."""
+    pos = start
+    while pos + 8 <= stop:
+        kind, size = struct.unpack(end + "II", data[pos:pos + 8])
+        if kind >> 16:  # a small element: type and size in the first half, its data in the second
             pos += 8
             continue
-        if pos + 8 + size > len(raw):
-            raise DataFormatError(path, f"an element of {size} bytes at byte {pos}", f"a file of {len(raw)} bytes")
-        if kind == 15:  # miCOMPRESSED
-            inflater, total, rest = zlib.decompressobj(), 0, raw[pos + 8:pos + 8 + size]
-            try:
-                while rest and total <= limit:
-                    total += len(inflater.decompress(rest, 2**20))
-                    rest = inflater.unconsumed_tail
-            except zlib.error as e:
-                raise DataFormatError(path, f"a compressed element at byte {pos} that inflates", f"{e}") from None
-            if total > limit:
-                raise DataFormatError(path, f"elements of at most {describe(limit)} inflated (the cap {LIMIT_ENV})",
-                                      f"the element at byte {pos} inflating past it")
-        held += total if kind == 15 else size
-        pos += 8 + size + (-size % 8 if kind != 15 else 0)
-    return held
+        if pos + 8 + size > stop:
+            raise DataFormatError(path, f"an element of {size} bytes at byte {pos} inside its parent",
+                                  f"{stop - pos - 8} bytes left")
+        if kind == 14 and depth < 16:  # miMATRIX: its sub-elements
+            _mat_elements(path, data, pos + 8, pos + 8 + size, end, depth + 1)
+        pos += 8 + size + (-size % 8)
+
+
+def _inflate(path: str, body: bytes, at: int, limit: int) -> bytes:
+    """A compressed element's bytes inflated in chunks of 1 MiB, never more than ``limit`` of them."""
+    inflater, out, rest = zlib.decompressobj(), bytearray(), body
+    try:
+        while rest and len(out) <= limit:
+            out += inflater.decompress(rest, 2**20)
+            rest = inflater.unconsumed_tail
+    except zlib.error as e:
+        raise DataFormatError(path, f"a compressed element at byte {at} that inflates", f"{e}") from None
+    if len(out) > limit:
+        raise DataFormatError(path, f"elements of at most {describe(limit)} inflated (the cap {LIMIT_ENV})",
+                              f"the element at byte {at} inflating past it")
+    return bytes(out)
+
+
+def _mat_plain(path: str, raw: bytes, limit: int) -> bytes:
+    """The MAT-file ``raw`` with every compressed element inflated (within ``limit`` in all) and every element's
+    byte count checked against what holds it (:func:`_mat_elements`), for scipy to read with no size unchecked.
+    Only version 5 files are read (scipy would read other headers as version 4)."""
+    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
+        raise DataFormatError(path, "a MATLAB 5.0 MAT-file header (128 bytes)", repr(raw[:20]))
+    end, pos, out = ("<" if raw[126:128] == b"IM" else ">"), 128, bytearray(raw[:128])
+    while pos + 8 <= len(raw):
+        kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
+        if kind >> 16 or pos + 8 + size > len(raw):
+            raise DataFormatError(path, f"an element of at most {len(raw) - pos - 8} bytes at byte {pos}",
+                                  f"the tag of type {kind & 0xFFFF}, {size} bytes")
+        if kind == 15:  # miCOMPRESSED: one element, compressed
+            element = _inflate(path, raw[pos + 8:pos + 8 + size], pos, limit - len(out))
+            pos += 8 + size
+        else:
+            element = raw[pos:pos + 8 + size + (-size % 8)]
+            pos += 8 + size + (-size % 8)
+        _mat_elements(path, element, 0, len(element), end)
+        out += element + bytes(-len(element) % 8)
+    return bytes(out)
 
 
 def read_mat_array(path: str, name: str) -> np.ndarray:
     """The real numeric array ``name`` of a MATLAB v5 ``.mat`` file, as float64 in C order, read by
     ``scipy.io.loadmat``. Sizes are checked first: the file's against the input cap (``POLYJAX_MAX_INPUT_MB``),
-    every element's byte count against the file's size, what each compressed element inflates to (counted in
-    chunks, never held) and the variable's declared shape against the cap. Raises :class:`polyjax.DataFormatError`
-    naming the file for anything else (v7.3/HDF5 files, complex data, structs, damaged elements)."""
+    what its compressed elements inflate to (in chunks, within the cap), every element's byte count against what
+    holds it, and the variable's declared shape against the cap and the bytes held. Raises
+    :class:`polyjax.DataFormatError` naming the file for anything else (v7.3/HDF5 files, complex data, structs,
+    damaged elements)."""
     limit = input_limit()
-    raw = read_bytes(path, limit, "a MATLAB MAT-file")
-    held = _mat_inflated(path, raw, limit)
+    raw = _mat_plain(path, read_bytes(path, limit, "a MATLAB MAT-file"), limit)
+    held = len(raw)
     shapes = _mat_shapes(path, raw)
     if name not in shapes:
         raise DataFormatError(path, f"a variable {name!r}", f"{sorted(shapes)}")
