@@ -119,12 +119,19 @@ def _mat_shapes(path: str, raw: bytes) -> dict:
         raise DataFormatError(path, "a readable MATLAB 5 MAT-file", f"{type(e).__name__}: {e}") from None
 
 
+#: the data types of MAT-file elements (MathWorks, *MAT-File Format*, table 1-1): 8, 10 and 11 are reserved
+_MAT_TYPES = frozenset((1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 14, 15, 16, 17, 18))
+
+
 def _mat_elements(path: str, data: bytes, start: int, stop: int, end: str, depth: int = 0) -> None:
     """Check that every element tagged in ``data[start:stop]`` (and every element nested in a matrix, to depth 16)
     lies inside it: a byte count running past its parent is a DataFormatError naming the file."""
     pos = start
     while pos + 8 <= stop:
         kind, size = struct.unpack(end + "II", data[pos:pos + 8])
+        if (kind & 0xFFFF if kind >> 16 else kind) not in _MAT_TYPES:  # scipy crashes on some others (type 0)
+            raise DataFormatError(path, f"an element of a MAT data type {sorted(_MAT_TYPES)} at byte {pos}",
+                                  f"type {kind & 0xFFFF if kind >> 16 else kind}")
         if kind >> 16:  # a small element: type and size in the first half, its data in the second
             pos += 8
             continue
@@ -133,7 +140,31 @@ def _mat_elements(path: str, data: bytes, start: int, stop: int, end: str, depth
                                   f"{stop - pos - 8} bytes left")
         if kind == 14 and depth < 16:  # miMATRIX: its sub-elements
             _mat_elements(path, data, pos + 8, pos + 8 + size, end, depth + 1)
+            _mat_matrix_header(path, data, pos + 8, pos + 8 + size, end)
         pos += 8 + size + (-size % 8)
+
+
+def _mat_matrix_header(path: str, data: bytes, start: int, stop: int, end: str) -> None:
+    """A matrix's flags: an 8-byte miUINT32 of a class 1..15 and no undefined bits, and for a numeric class its
+    sub-elements (flags, dims, name, real part, and an imaginary part when flagged complex): scipy reads past the
+    element otherwise."""
+    if stop - start < 16:
+        return  # an empty matrix (scipy reads it as such)
+    kind, size = struct.unpack(end + "II", data[start:start + 8])
+    flags = struct.unpack(end + "I", data[start + 8:start + 12])[0] if (kind, size) == (6, 8) else None
+    if flags is None or flags >> 16 or not 1 <= flags & 0xFF <= 15 or flags & 0xF100:
+        raise DataFormatError(path, f"a matrix at byte {start - 8} with array flags (8 bytes of miUINT32, class 1 "
+                              "to 15)", f"type {kind}, {size} bytes, flags {flags!r}")
+    if 6 <= flags & 0xFF <= 15:
+        count, pos = 0, start
+        while pos + 8 <= stop:
+            k, n = struct.unpack(end + "II", data[pos:pos + 8])
+            pos += 8 if k >> 16 else 8 + n + (-n % 8)
+            count += 1
+        want = 5 if flags & 0x800 else 4
+        if count != want:
+            raise DataFormatError(path, f"a numeric matrix at byte {start - 8} of {want} parts (flags, dims, name, "
+                                  "values" + (", imaginary values)" if want == 5 else ")"), f"{count} parts")
 
 
 def _inflate(path: str, body: bytes, at: int, limit: int) -> bytes:
