@@ -19,7 +19,7 @@ import polyjax as pj
 
 from _fuzz_problems import MEMORY_CAP, PROBLEMS, peak_bytes
 
-DEFAULT_EXAMPLES = 12
+DEFAULT_EXAMPLES = 25
 SLOW_EXAMPLES = 400
 TIERS = [pytest.param(DEFAULT_EXAMPLES, id="default"),
          pytest.param(SLOW_EXAMPLES, id="slow", marks=pytest.mark.slow)]
