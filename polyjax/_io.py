@@ -33,7 +33,6 @@ import importlib.util
 import json
 import os
 import warnings
-import zipfile
 from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
@@ -42,9 +41,11 @@ from typing import Any
 import numpy as np
 
 from ._arrays import device_array
-from ._errors import DataFormatError, DataNotFoundError, InputError, UnknownNameError
+from ._errors import DataFormatError, DataNotFoundError, InputError, PolyjaxError, UnknownNameError
 from ._files import check_output_path, write_atomically
 from ._model import RESULTS, PolynomialBRDF
+from ._reading.bounded import NUMERIC_KINDS, load_json, read_npz
+from ._reading.model import check_polynomial_fields
 
 ENTRY_POINT_GROUP = "polyjax.models"
 
@@ -304,36 +305,52 @@ def _write_whole(path: Path, write) -> None:
 
 def _read_file(path: Path, arrays: bool) -> tuple:
     """``(header, arrays)`` of a model file written by :func:`save_model` (``arrays`` empty unless asked for; an
-    ``.npz``'s header alone is read without its arrays).
+    ``.npz``'s header alone is read without its arrays). Sizes are checked before anything is read: the file against
+    the input cap, each ``.npz`` member's ``.npy`` header against the member's size (``polyjax._reading.bounded``).
 
     Raises:
         DataNotFoundError: no such file. DataFormatError: unreadable content.
     """
     if not path.is_file():
         raise DataNotFoundError(f"{str(path)!r}: no such model file")
-    out = {}
+    what = f"a {FORMAT} file written by save_model"
+    if path.suffix == ".json":
+        meta = load_json(path, what)
+        out = _json_arrays(path, meta) if arrays else {}
+        return meta, out
+    stored = read_npz(path, what, kinds=NUMERIC_KINDS + "U")
     try:
-        if path.suffix == ".json":
-            meta = json.loads(path.read_text())
-            if arrays and isinstance(meta, dict) and isinstance(meta.get("arrays"), dict):
-                out = {k: np.asarray(v["data"], dtype=v["dtype"]).reshape(v["shape"])
-                       for k, v in meta["arrays"].items()}
-        else:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["__meta__"]))
-                if arrays:
-                    out = {k: z[k] for k in z.files if k != "__meta__"}
-    except (ValueError, KeyError, TypeError, OSError, EOFError, zipfile.BadZipFile) as e:
-        raise DataFormatError(path, f"a {FORMAT} file written by save_model", f"unreadable content ({e})") from None
-    return meta, out
+        meta = json.loads(str(stored.pop("__meta__")[()].item()) if "__meta__" in stored else "")
+    except (ValueError, TypeError, IndexError, RecursionError) as e:
+        raise DataFormatError(path, what, f"unreadable header __meta__ ({type(e).__name__}: {e})") from None
+    return meta, (stored if arrays else {})
+
+
+def _json_arrays(path: Path, meta) -> dict:
+    """The arrays of a ``.json`` model (``{"dtype", "shape", "data"}`` each), numeric dtypes only, as numpy."""
+    found = meta.get("arrays") if isinstance(meta, dict) else None
+    if not isinstance(found, dict):
+        return {}
+    out = {}
+    for k, v in found.items():
+        try:
+            dtype = np.dtype(v["dtype"])
+            if dtype.kind not in NUMERIC_KINDS:
+                raise TypeError(f"dtype {dtype}: expected a numeric dtype")
+            out[k] = np.asarray(v["data"], dtype=dtype).reshape(v["shape"])
+        except (ValueError, KeyError, TypeError, OverflowError, IndexError) as e:
+            raise DataFormatError(path, f"array {k!r} as {{'dtype', 'shape', 'data'}} of numbers",
+                                  f"{type(e).__name__}: {e}") from None
+    return out
 
 
 def load_model(path: str | os.PathLike):
     """Read a model written by :func:`save_model` (any version); it evaluates identically.
 
     Raises:
-        DataNotFoundError: no such file. DataFormatError: not a saved model, a newer version, or missing
-        arrays. UnknownNameError: its kind is provided by a package that is not installed.
+        DataNotFoundError: no such file. DataFormatError: not a saved model, a newer version, missing arrays,
+        arrays whose shapes disagree, sizes over the input cap (``POLYJAX_MAX_INPUT_MB``). UnknownNameError: its
+        kind is provided by a package that is not installed.
     """
     path = Path(path)
     meta, arrays = _read_file(path, arrays=True)
@@ -347,12 +364,19 @@ def load_model(path: str | os.PathLike):
                                   "(written by a newer polyjax)")
         kind_name, static = meta.get("kind"), meta.get("static", {})
     else:
-        raise DataFormatError(path, f"format {FORMAT!r} (or {FORMAT_V1!r})", repr(fmt))
+        raise DataFormatError(path, f"format {FORMAT!r} (or {FORMAT_V1!r})", repr(fmt)[:80])
+    if not isinstance(kind_name, str) or not isinstance(static, dict):
+        raise DataFormatError(path, "a kind's name and its static fields as a JSON object",
+                              f"{type(kind_name).__name__} and {type(static).__name__}")
     try:
         kind = kind_named(kind_name)
     except UnknownNameError as e:
         raise UnknownNameError(f"{str(path)!r}: {e}") from None
+    if kind is POLYNOMIAL_KIND:
+        check_polynomial_fields(path, static, arrays)
     try:
         return kind.from_arrays(static, arrays)
+    except PolyjaxError:
+        raise
     except (KeyError, TypeError, ValueError) as e:
         raise DataFormatError(path, f"the fields of a {kind_name} model", f"{e}") from None

@@ -157,13 +157,13 @@ def test_program_in_a_folder_others_may_write_is_not_loaded(tmp_path):
 
 # ---------------------------------------------------------------- item 3: user strings in generated code
 def _model(batch=()):
-    """A polynomial model of degree 1 in the Ashikhmin-Shirley variables (``k = 2``), built without a fit."""
+    """A polynomial model of degree 1 in the Lafortune variables (``k = 2``), built without a fit."""
     b = tuple(batch)
     return pj.PolynomialBRDF(
         coefficients=np.broadcast_to([0.2, 0.1, 0.05], b + (3,)).copy(), degree=np.ones(b, int),
         mean=np.zeros(b + (2,)), rotation=np.broadcast_to(np.eye(2), b + (2, 2)).copy(), centre=np.zeros(b + (2,)),
         halfwidth=np.ones(b + (2,)), l2=np.zeros(b), rank=np.full(b, 3), condition=np.ones(b),
-        n_used=np.full(b, 10), status=np.zeros(b, int), variables="ashikhmin-shirley", basis="monomial",
+        n_used=np.full(b, 10), status=np.zeros(b, int), variables="lafortune", basis="monomial",
         interactions=False, max_degree=1)
 
 

@@ -7,7 +7,6 @@ paths relative to the file); ``polyjax fit-images --example DIR`` writes one wit
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -15,8 +14,9 @@ import numpy as np
 import polyjax as pj
 
 from .._config import check_model_file, check_output_dir
-from .._errors import InputError
+from .._errors import DataFormatError, InputError, PolyjaxError
 from .._files import inside_folder
+from .._reading.bounded import load_json
 from ..render import Camera, DirectionalLight, Lambertian, Plane, PointLight, Scene, Sphere, load_envmap, read_exr
 from ..render._example_scene import write_example_scene
 from ._args import add_model_options, spec_from_args, strict_json
@@ -45,49 +45,68 @@ def add_fit_images_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     return p
 
 
+def _object(d, where: str) -> dict:
+    """``d`` when it is a JSON object, else an InputError naming ``where``."""
+    if not isinstance(d, dict):
+        raise InputError(f"{where}: expected a JSON object, found {type(d).__name__}")
+    return d
+
+
+def _list(d, where: str) -> list:
+    """``d`` when it is a JSON list, else an InputError naming ``where``."""
+    if not isinstance(d, list):
+        raise InputError(f"{where}: expected a JSON list, found {type(d).__name__}")
+    return d
+
+
 def _field(d: dict, key: str, where: str, default=None, required=False):
-    if key not in d:
+    if key not in _object(d, where):
         if required:
             raise InputError(f"{where}: expected a field {key!r}")
         return default
     return d[key]
 
 
-def load_scene_json(path: str | Path):
-    """Read a ``fit-images`` JSON description: ``(scenes, images, target)``."""
-    path = Path(path)
+def _file(d: dict, where: str, path: Path, what: str) -> Path:
+    """The file named by the field ``file`` of ``d``: a relative path inside the scene file's folder (else a
+    :class:`polyjax.DataFormatError` naming ``path`` and ``what``)."""
+    name = _field(d, "file", where, required=True)
+    if not isinstance(name, str) or not name:
+        raise InputError(f"{where}: file: expected a file name, found {name!r}")
+    return inside_folder(path.parent, name, path, what)
+
+
+def _read_spec(path: Path) -> dict:
+    """The scene file's JSON object (its size within the input cap, nesting and integers bounded)."""
+    if not path.is_file():
+        raise InputError(f"{path}: scene file not found")
     try:
-        spec = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{path}: scene file not found") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{path}: expected JSON, {e}") from None
+        spec = load_json(path, "a JSON scene description")
+    except DataFormatError as e:
+        raise InputError(f"{path}: expected JSON, {e.found}") from None
     if not isinstance(spec, dict):
         raise InputError(f"{path}: expected a JSON object with 'camera', 'objects', 'images'")
-    base = path.parent
-    entries = _field(spec, "images", str(path), required=True)
-    if not isinstance(entries, list) or not entries:
-        raise InputError(f"{path}: 'images' must be a non-empty list")
-    images = []
-    for i, e in enumerate(entries):
-        f = inside_folder(base, _field(e, "file", f"{path}: images[{i}]", required=True), path, f"images[{i}].file")
-        if not f.exists():
-            raise InputError(f"{path}: images[{i}]: file {f} not found")
-        images.append(read_exr(f))
-    cam_spec = dict(_field(spec, "camera", str(path), required=True))
+    return spec
+
+
+def _camera(spec: dict, path: Path, images) -> Camera:
+    cam_spec = dict(_object(_field(spec, "camera", str(path), required=True), f"{path}: camera"))
     for key in ("fov_deg", "width", "height", "ortho_height"):
         if key in cam_spec and (isinstance(cam_spec[key], bool) or not isinstance(cam_spec[key], (int, float))):
             raise InputError(f"{path}: camera.{key}: expected a number, found {cam_spec[key]!r}")
     cam_spec.setdefault("height", images[0].shape[0])
     cam_spec.setdefault("width", images[0].shape[1])
     try:
-        camera = Camera(**cam_spec)
+        return Camera(**cam_spec)
     except (TypeError, ValueError) as e:
         raise InputError(f"{path}: camera: {e}") from None
+
+
+def _objects(spec: dict, path: Path) -> list:
     placeholder = Lambertian(0.5)
     objects = []
-    for i, o in enumerate(_field(spec, "objects", str(path), [{"type": "sphere"}])):
-        kind = o.get("type", "sphere")
+    for i, o in enumerate(_list(_field(spec, "objects", str(path), [{"type": "sphere"}]), f"{path}: objects")):
+        kind = _object(o, f"{path}: objects[{i}]").get("type", "sphere")
         args = {k: v for k, v in o.items() if k != "type"}
         try:
             if kind == "sphere":
@@ -98,28 +117,55 @@ def load_scene_json(path: str | Path):
                 raise InputError(f"{path}: objects[{i}]: expected type 'sphere' or 'plane', found {kind!r}")
         except (TypeError, ValueError) as e:
             raise InputError(f"{path}: objects[{i}]: {e}") from None
-    scenes = []
+    return objects
+
+
+def _lights(e: dict, path: Path, i: int) -> list:
+    lights = []
+    for j, li in enumerate(_list(_field(e, "lights", f"{path}: images[{i}]", required=True),
+                                 f"{path}: images[{i}].lights")):
+        where = f"{path}: images[{i}].lights[{j}]"
+        kind = _object(li, where).get("type", "point")
+        args = {k: v for k, v in li.items() if k != "type"}
+        try:
+            if kind == "point":
+                lights.append(PointLight(**args))
+            elif kind == "directional":
+                lights.append(DirectionalLight(**args))
+            elif kind == "environment":
+                f = _file(args, where, path, f"images[{i}].lights[{j}].file")
+                lights.append(load_envmap(f, float(args.get("scale", 1.0))))
+            else:
+                raise InputError(f"{where}: expected type 'point', 'directional' or 'environment', found {kind!r}")
+        except (TypeError, ValueError) as err:
+            if isinstance(err, PolyjaxError):
+                raise
+            raise InputError(f"{where}: {err}") from None
+    return lights
+
+
+def load_scene_json(path: str | Path):
+    """Read a ``fit-images`` JSON description: ``(scenes, images, target)``. Every fault of the file (invalid or
+    too deeply nested JSON, a field of the wrong type, a missing image) is an :class:`polyjax.InputError` naming
+    it, raised before the fit."""
+    path = Path(path)
+    spec = _read_spec(path)
+    entries = _field(spec, "images", str(path), required=True)
+    if not isinstance(entries, list) or not entries:
+        raise InputError(f"{path}: 'images' must be a non-empty list")
+    images = []
     for i, e in enumerate(entries):
-        lights = []
-        for j, li in enumerate(_field(e, "lights", f"{path}: images[{i}]", required=True)):
-            kind = li.get("type", "point")
-            args = {k: v for k, v in li.items() if k != "type"}
-            where = f"{path}: images[{i}].lights[{j}]"
-            try:
-                if kind == "point":
-                    lights.append(PointLight(**args))
-                elif kind == "directional":
-                    lights.append(DirectionalLight(**args))
-                elif kind == "environment":
-                    lights.append(load_envmap(inside_folder(base, _field(args, "file", where, required=True), path,
-                                                            f"images[{i}].lights[{j}].file"),
-                                              float(args.get("scale", 1.0))))
-                else:
-                    raise InputError(f"{where}: expected type 'point', 'directional' or 'environment', found {kind!r}")
-            except (TypeError, ValueError) as err:
-                raise InputError(f"{where}: {err}") from None
-        scenes.append(Scene(camera, objects, lights))
-    return scenes, images, int(spec.get("target", 0))
+        f = _file(e, f"{path}: images[{i}]", path, f"images[{i}].file")
+        if not f.exists():
+            raise InputError(f"{path}: images[{i}]: file {f} not found")
+        images.append(read_exr(f))
+    camera = _camera(spec, path, images)
+    objects = _objects(spec, path)
+    scenes = [Scene(camera, objects, _lights(e, path, i)) for i, e in enumerate(entries)]
+    target = spec.get("target", 0)
+    if isinstance(target, bool) or not isinstance(target, int):
+        raise InputError(f"{path}: target: expected an integer, found {target!r}")
+    return scenes, images, target
 
 
 def run_fit_images(args) -> int:

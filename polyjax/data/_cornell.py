@@ -34,6 +34,7 @@ import numpy as np
 from .._config import data_file
 from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements, make_measurements
+from .._reading.bounded import read_bytes
 from ._colour import spectral_to_luminance, spectral_to_rgb, spectral_to_xyz, xyz_to_rgb_matrix
 from ._errors import (
     EmptyFileError,
@@ -50,7 +51,9 @@ CHANNEL_CHOICES = ("rgb", "luminance", "xyz", "spectral")
 
 
 def _read_text(path: Path, expected: str) -> str:
-    data = path.read_bytes()
+    if not path.is_file():
+        raise DataNotFoundError(f"Cornell BRDF file {str(path)!r}: no such file")
+    data = read_bytes(path, None, expected)
     if not data.strip():
         raise EmptyFileError(path, expected, "an empty file" if not data else "only whitespace")
     if b"\x00" in data[:4096]:
@@ -140,6 +143,13 @@ def read_cornell_pbrt(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     return rows[:, :4].copy(), wl.copy(), rows[:, 4:].copy()
 
 
+def _starts_with_number(line: str) -> bool:
+    """Whether the first comma- or space-separated token of ``line`` is a number (False for a line of only
+    separators, such as a lone comma)."""
+    toks = line.replace(",", " ").split()
+    return bool(toks) and _is_number(toks[0])
+
+
 def _is_number(t: str) -> bool:
     try:
         float(t)
@@ -182,9 +192,12 @@ def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians"
                 if len(cols) < 5:
                     raise HeaderError(path, "VARS with 4 angle columns and at least one value column", repr(s))
                 names = cols
-            elif _is_number(s.replace(",", " ").split()[0]):
+            elif _starts_with_number(s):
                 raise HeaderError(path, "a 'VARS ...' line naming the columns before the data",
                                   f"data on line {no} first")
+            elif not s.replace(",", " ").split():
+                raise HeaderError(path, "header lines of a keyword and its values (NAME, NUM_POINTS, VARS ...)",
+                                  f"the line {s!r} (line {no})")
             continue
         toks = [t for t in re.split(r"[,\s]+", s) if t]
         if len(toks) != len(names):
@@ -193,7 +206,7 @@ def read_cornell_astm(path: str | os.PathLike, *, angle_unit: str = "radians"
         data_rows.append([_to_float(t, path, no, expected) for t in toks])
         row_lines.append(no)
     if names is None:
-        if not any(_is_number(ln.strip().replace(",", " ").split()[0]) for ln in lines if ln.strip()):
+        if not any(_starts_with_number(ln) for ln in lines):
             raise WrongFormatError(path, expected, "no VARS header and no numeric rows")
         raise HeaderError(path, "a 'VARS ...' header line", "none")
     if not data_rows:

@@ -19,6 +19,7 @@ import numpy as np
 from .._config import data_file
 from .._errors import DataFormatError, UnknownNameError
 from .._measurements import Measurements, make_measurements
+from .._reading.bounded import read_text
 
 N_GEOMETRIES = 205
 
@@ -36,10 +37,7 @@ ISOTROPIC_52: tuple[int, ...] = tuple(
 
 
 def _read_numbers(path: Path, n_cols: int, what: str) -> np.ndarray:
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError:
-        raise DataFormatError(path, f"a text file of {what}", "binary content") from None
+    text = read_text(path, None, f"a text file of {what}")
     rows = [ln.split() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not rows:
         raise DataFormatError(path, f"{what}", "an empty file")
@@ -75,12 +73,12 @@ def curet_sample_names(root: str | os.PathLike | None = None) -> dict[int, str]:
     """Sample number -> material name, from ``curet/sample_labels.txt``."""
     path = data_file("curet/sample_labels.txt", root)
     names = {}
-    for line in path.read_text().splitlines():
+    for line in read_text(path, None, "a text file of 'number<TAB>name' lines").splitlines():
         if not line.strip() or line.startswith("#"):
             continue
         parts = line.split("\t") if "\t" in line else line.split(None, 1)
-        if len(parts) != 2:
-            raise DataFormatError(path, "'number<TAB>name' lines", repr(line))
+        if len(parts) != 2 or not (parts[0].strip().isascii() and parts[0].strip().isdigit()):
+            raise DataFormatError(path, "'number<TAB>name' lines", repr(line[:80]))
         names[int(parts[0])] = parts[1].strip()
     return names
 

@@ -26,7 +26,6 @@ import difflib
 import functools
 import io
 import os
-import zipfile
 from pathlib import Path, PurePosixPath
 from typing import Sequence
 
@@ -39,8 +38,10 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._arrays import device_array
 from .._config import data_file
-from .._errors import DataNotFoundError, InputError
+from .._errors import DataNotFoundError, InputError, PolyjaxError
 from .._measurements import Measurements
+from .._reading.bounded import open_zip, read_bytes, read_zip_member
+from .._reading.limits import LIMIT_ENV, network_limit
 from ._errors import HeaderError, NonFiniteValueError, UnknownMaterialError, WrongFormatError
 from ._merl import MERL_NAMES, MERL_RESOLUTION, TABLE3_MATERIALS, _choose_bins, merl_bin_angles, merl_grid
 
@@ -174,11 +175,12 @@ class _NetworkSet:
             found = [(p.stem, p.relative_to(self.path).as_posix()) for p in sorted(self.path.rglob("*.h5"))]
         elif self.path.is_file():
             try:
-                self.zip = zipfile.ZipFile(self.path)
-            except zipfile.BadZipFile:
+                self.zip = open_zip(self.path, "a zip archive (or folder) of Keras .h5 networks")
+            except PolyjaxError as e:
                 raise WrongFormatError(self.path, "a zip archive (or folder) of Keras .h5 networks",
-                                       "a file that is not a zip archive") from None
-            found = [(PurePosixPath(i.filename).stem, i.filename) for i in self.zip.infolist()
+                                       getattr(e, "found", str(e))) from None
+            self.infos = {i.filename: i for i in self.zip.infolist()}
+            found = [(PurePosixPath(i.filename).stem, i.filename) for i in self.infos.values()
                      if not i.is_dir() and i.filename.lower().endswith(".h5")]
         else:
             raise DataNotFoundError(f"neural-BRDF set {str(self.path)!r}: no such zip file or folder")
@@ -212,8 +214,14 @@ class _NetworkSet:
                                    f"({len(self.members)} networks){hint}")
 
     def read(self, name: str) -> tuple[np.ndarray, ...]:
+        """The network's six arrays; the member (or file) is read only when its size is within
+        :func:`polyjax._reading.limits.network_limit`, and inflated in bounded chunks."""
         member = self.members[name]
-        blob = self.zip.read(member) if self.zip is not None else (self.path / member).read_bytes()
+        if self.zip is not None:
+            blob = read_zip_member(self.zip, self.infos[member], self.path, network_limit(),
+                                   f"of one network, 16 MiB or {LIMIT_ENV}")
+        else:
+            blob = read_bytes(self.path / member, network_limit(), "a Keras .h5 network")
         return _parse_weights(blob, self.path, member)
 
 
@@ -221,33 +229,40 @@ def _parse_weights(blob: bytes, path: Path, member: str) -> tuple[np.ndarray, ..
     """The six arrays ``W1, b1, W2, b2, W3, b3`` of a Keras weights file.
 
     Layers are recognised by their kernels' shapes (6, 21), (21, 21), (21, 3), whatever Keras named them
-    (``dense_1``, ``dense_4`` ...); each bias is the ``bias`` dataset beside its kernel.
+    (``dense_1``, ``dense_4`` ...); each bias is the ``bias`` dataset beside its kernel. Every dataset's shape is
+    checked before it is read; a file h5py cannot read is a :class:`WrongFormatError` naming the member.
     """
     try:
-        f = h5py.File(io.BytesIO(blob), "r")
-    except OSError as e:
+        with h5py.File(io.BytesIO(blob), "r") as f:
+            return _layer_weights(f, path, member)
+    except PolyjaxError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError, OverflowError) as e:
         raise WrongFormatError(path, f"an HDF5 file in {member!r}", f"unreadable content ({e})") from None
+
+
+def _layer_weights(f, path: Path, member: str) -> tuple[np.ndarray, ...]:
+    """The kernels and biases of :func:`_parse_weights` from the open HDF5 file ``f``."""
     out = []
-    with f:
-        keys = _h5_keys(f)
-        kernels = [k for k in keys if k.rsplit("/", 1)[-1].split(":")[0] == "kernel"]
-        for shape in (shp for _, shp in _LAYERS):
-            hits = [k for k in kernels if tuple(f[k].shape) == shape]
-            if len(hits) != 1:
-                found = {k: tuple(f[k].shape) for k in kernels}
-                raise HeaderError(path, f"one kernel of shape {shape} in {member!r} (layers 6-21-21-3)",
-                                  f"kernels {found}" if found else f"datasets {sorted(keys)}")
-            key = hits[0]
-            bias = key.rsplit("/", 1)[0] + "/" + key.rsplit("/", 1)[-1].replace("kernel", "bias")
-            if bias not in f:
-                raise HeaderError(path, f"dataset {bias!r} in {member!r}", f"datasets {sorted(keys)}")
-            for k, shp in ((key, shape), (bias, shape[1:])):
-                a = np.asarray(f[k], dtype=np.float32)
-                if a.shape != shp:
-                    raise HeaderError(path, f"{k!r} of shape {shp} in {member!r}", f"shape {a.shape}")
-                if not np.all(np.isfinite(a)):
-                    raise NonFiniteValueError(path, f"finite weights in {member!r}/{k}", "NaN or inf")
-                out.append(a)
+    keys = _h5_keys(f)
+    kernels = [k for k in keys if k.rsplit("/", 1)[-1].split(":")[0] == "kernel"]
+    for shape in (shp for _, shp in _LAYERS):
+        hits = [k for k in kernels if tuple(f[k].shape) == shape]
+        if len(hits) != 1:
+            found = {k: tuple(f[k].shape) for k in kernels}
+            raise HeaderError(path, f"one kernel of shape {shape} in {member!r} (layers 6-21-21-3)",
+                              f"kernels {found}" if found else f"datasets {sorted(keys)}")
+        key = hits[0]
+        bias = key.rsplit("/", 1)[0] + "/" + key.rsplit("/", 1)[-1].replace("kernel", "bias")
+        if bias not in f or not hasattr(f[bias], "shape"):
+            raise HeaderError(path, f"dataset {bias!r} in {member!r}", f"datasets {sorted(keys)}")
+        for k, shp in ((key, shape), (bias, shape[1:])):
+            if tuple(f[k].shape) != shp:  # the declared shape, before any data is read
+                raise HeaderError(path, f"{k!r} of shape {shp} in {member!r}", f"shape {tuple(f[k].shape)}")
+            a = np.asarray(f[k], dtype=np.float32)
+            if not np.all(np.isfinite(a)):
+                raise NonFiniteValueError(path, f"finite weights in {member!r}/{k}", "NaN or inf")
+            out.append(a)
     return tuple(out)
 
 
@@ -316,7 +331,7 @@ def load_nbrdf(
             wanted = [nets.resolve(n) for n in names]
             if not wanted:
                 raise InputError("names: expected at least one material name (or None for all)")
-        out = {n: NeuralBRDF(*(jnp.asarray(a) for a in nets.read(n)), name=n) for n in wanted}
+        out = {n: NeuralBRDF(*(device_array(a) for a in nets.read(n)), name=n) for n in wanted}
     return out[wanted[0]] if single else out
 
 

@@ -13,13 +13,17 @@ CVPR 2016 / TPAMI 2019) stores each object in a folder ``pmsData/<object>PNG/``:
 - the camera is orthographic and looks along ``-z`` of that frame: the view direction is ``(0, 0, 1)`` everywhere.
 
 16-bit PNGs are read by pypng (Pillow would truncate them to 8 bits), the ``.mat`` file by :func:`read_mat_array`
-(the subset of the MAT-file v5 format such a file uses: MathWorks, *MAT-File Format*, R2024a, chapter 1). Every
-file is checked before any array reaches JAX; a bad one raises :class:`polyjax.DataFormatError` (or
-:class:`polyjax.DataNotFoundError`) naming it.
+(``scipy.io.loadmat``). Every file is checked before any array reaches JAX, and its declared sizes before it is read:
+a PNG's dimensions against the input cap (``POLYJAX_MAX_INPUT_MB``) and against what its compressed bytes can hold
+(deflate inflates at most 1032-fold); a MAT-file's compressed elements inflated in chunks within the cap, every
+element's byte count against what holds it, and the variable's shape against the cap; the text files' sizes against
+the cap. A bad
+file raises :class:`polyjax.DataFormatError` (or :class:`polyjax.DataNotFoundError`) naming it.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import struct
 import zlib
@@ -27,23 +31,64 @@ from typing import Sequence
 
 import numpy as np
 import png
+import scipy.io
 
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._files import inside_folder
+from .._reading.bounded import checked_size, read_bytes, read_text
+from .._reading.limits import LIMIT_ENV, MAX_DEFLATE_RATIO, describe, input_limit
 from ..inverse._capture import Capture
 
 #: the camera's white level: a 16-bit PNG value is divided by it (and 1.0 is a saturated pixel)
 PNG16_MAX = 65535.0
 
 
+_PNG_ERRORS = (png.Error, ValueError, OSError, EOFError, zlib.error, IndexError, TypeError, AssertionError)
+
+
+def _png_reader(path: str, header_only: bool = False) -> png.Reader:
+    """A pypng reader of the PNG ``path`` past its header, its dimensions checked: the decoded pixels (2 bytes a
+    value) within the input cap, and the rows' bytes within what the file's size can inflate to. The file is read
+    first (within the cap; its first 64 KiB when ``header_only`` and the header lies there): pypng then reads its
+    chunks from memory, so a damaged chunk length never makes it allocate more than the file holds."""
+    size = checked_size(path, None, "a PNG file")
+    try:
+        if header_only and size > 2**16:
+            try:
+                with open(path, "rb") as fh:
+                    r = png.Reader(bytes=fh.read(2**16))
+                r.preamble()
+            except _PNG_ERRORS:  # chunks before the pixels longer than 64 KiB: read it all
+                header_only = False
+        if not header_only or size <= 2**16:
+            r = png.Reader(bytes=read_bytes(path, None, "a PNG file"))
+            r.preamble()
+        h, w, planes, bits = int(r.height), int(r.width), int(r.planes), int(r.bitdepth)
+    except _PNG_ERRORS as e:
+        raise DataFormatError(path, "a readable PNG file", f"{e}") from None
+    decoded, limit = 2 * h * w * planes, input_limit()
+    if decoded > limit:
+        raise DataFormatError(path, f"a PNG of at most {describe(limit)} of pixels (the cap {LIMIT_ENV})",
+                              f"{w} x {h} pixels of {planes} channels ({describe(decoded)})")
+    if h * (1 + (w * planes * bits + 7) // 8) > MAX_DEFLATE_RATIO * size + 1024:
+        raise DataFormatError(path, f"{w} x {h} pixels of {planes} channels in at least "
+                              f"1/{MAX_DEFLATE_RATIO} of their bytes (deflate's largest ratio)", f"{size} bytes")
+    return r
+
+
 def read_png(path: str, bits: int | None = 16) -> np.ndarray:
     """The pixels of a PNG as an integer array ``(H, W, channels)`` (``(H, W)`` for one channel), at its own bit
     depth (16-bit values are kept). ``bits``: the bit depth expected (None: any). Raises
-    :class:`polyjax.DataFormatError` naming the file when it is not a PNG or has another depth."""
+    :class:`polyjax.DataFormatError` naming the file when it is not a PNG, has another depth, or declares more
+    pixels than the input cap (``POLYJAX_MAX_INPUT_MB``) or its size can hold (checked before any pixel is
+    decoded)."""
+    r = _png_reader(path)
+    if bits is not None and int(r.bitdepth) != bits:
+        raise DataFormatError(path, f"a {bits}-bit PNG", f"{r.bitdepth} bits per channel")
     try:
-        w, h, rows, info = png.Reader(filename=path).asDirect()
+        w, h, rows, info = r.asDirect()
         data = np.array([np.asarray(r, dtype=np.uint16) for r in rows])
-    except (png.Error, ValueError, OSError, EOFError) as e:
+    except _PNG_ERRORS as e:
         raise DataFormatError(path, "a readable PNG file", f"{e}") from None
     if bits is not None and info["bitdepth"] != bits:
         raise DataFormatError(path, f"a {bits}-bit PNG", f"{info['bitdepth']} bits per channel")
@@ -56,13 +101,8 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
 def check_png_header(path: str, bits: int, shape: tuple[int, int], planes: int) -> None:
     """Check a PNG's header (no pixel is decoded): ``bits`` per channel, ``planes`` channels, ``shape = (H, W)``.
     Raises :class:`polyjax.DataFormatError` naming the file otherwise."""
-    try:
-        with open(path, "rb") as fh:
-            r = png.Reader(file=fh)
-            r.preamble()
-            found = (int(r.bitdepth), int(r.planes), (int(r.height), int(r.width)))
-    except (png.Error, ValueError, OSError, EOFError) as e:
-        raise DataFormatError(path, "a readable PNG file", f"{e}") from None
+    r = _png_reader(path, header_only=True)
+    found = (int(r.bitdepth), int(r.planes), (int(r.height), int(r.width)))
     if found[0] != bits:
         raise DataFormatError(path, f"a {bits}-bit PNG (linear camera values)", f"{found[0]} bits per channel")
     if found[1:] != (planes, tuple(shape)):
@@ -70,69 +110,131 @@ def check_png_header(path: str, bits: int, shape: tuple[int, int], planes: int) 
                               f"{found[1]} channels of {found[2][1]} x {found[2][0]}")
 
 
-_MAT_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 9: "f8", 12: "i8", 13: "u8"}
+def _mat_shapes(path: str, raw: bytes) -> dict:
+    """``{name: (shape, class)}`` of the variables of a MAT-file, from their headers (``scipy.io.whosmat``)."""
+    try:
+        return {name: (tuple(int(d) for d in shape), cls) for name, shape, cls in scipy.io.whosmat(io.BytesIO(raw))}
+    except MemoryError:
+        raise
+    except Exception as e:  # noqa: BLE001  (scipy's parser raises many kinds on a damaged file: each is named here)
+        raise DataFormatError(path, "a readable MATLAB 5 MAT-file", f"{type(e).__name__}: {e}") from None
+
+
+#: the data types of MAT-file elements (MathWorks, *MAT-File Format*, table 1-1): 8, 10 and 11 are reserved
+_MAT_TYPES = frozenset((1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 14, 15, 16, 17, 18))
+
+
+def _mat_elements(path: str, data: bytes, start: int, stop: int, end: str, depth: int = 0) -> None:
+    """Check that every element tagged in ``data[start:stop]`` (and every element nested in a matrix, to depth 16)
+    lies inside it: a byte count running past its parent is a DataFormatError naming the file."""
+    pos = start
+    while pos + 8 <= stop:
+        kind, size = struct.unpack(end + "II", data[pos:pos + 8])
+        if (kind & 0xFFFF if kind >> 16 else kind) not in _MAT_TYPES:  # scipy crashes on some others (type 0)
+            raise DataFormatError(path, f"an element of a MAT data type {sorted(_MAT_TYPES)} at byte {pos}",
+                                  f"type {kind & 0xFFFF if kind >> 16 else kind}")
+        if kind >> 16:  # a small element: type and size in the first half, its data in the second
+            pos += 8
+            continue
+        if pos + 8 + size > stop:
+            raise DataFormatError(path, f"an element of {size} bytes at byte {pos} inside its parent",
+                                  f"{stop - pos - 8} bytes left")
+        if kind == 14 and depth < 16:  # miMATRIX: its sub-elements
+            _mat_elements(path, data, pos + 8, pos + 8 + size, end, depth + 1)
+            _mat_matrix_header(path, data, pos + 8, pos + 8 + size, end)
+        pos += 8 + size + (-size % 8)
+
+
+def _mat_matrix_header(path: str, data: bytes, start: int, stop: int, end: str) -> None:
+    """A matrix's flags: an 8-byte miUINT32 of a class 1..15 and no undefined bits, and for a numeric class its
+    sub-elements (flags, dims, name, real part, and an imaginary part when flagged complex): scipy reads past the
+    element otherwise."""
+    if stop - start < 16:
+        return  # an empty matrix (scipy reads it as such)
+    kind, size = struct.unpack(end + "II", data[start:start + 8])
+    flags = struct.unpack(end + "I", data[start + 8:start + 12])[0] if (kind, size) == (6, 8) else None
+    if flags is None or flags >> 16 or not 1 <= flags & 0xFF <= 15 or flags & 0xF100:
+        raise DataFormatError(path, f"a matrix at byte {start - 8} with array flags (8 bytes of miUINT32, class 1 "
+                              "to 15)", f"type {kind}, {size} bytes, flags {flags!r}")
+    if 6 <= flags & 0xFF <= 15:
+        count, pos = 0, start
+        while pos + 8 <= stop:
+            k, n = struct.unpack(end + "II", data[pos:pos + 8])
+            pos += 8 if k >> 16 else 8 + n + (-n % 8)
+            count += 1
+        want = 5 if flags & 0x800 else 4
+        if count != want:
+            raise DataFormatError(path, f"a numeric matrix at byte {start - 8} of {want} parts (flags, dims, name, "
+                                  "values" + (", imaginary values)" if want == 5 else ")"), f"{count} parts")
+
+
+def _inflate(path: str, body: bytes, at: int, limit: int) -> bytes:
+    """A compressed element's bytes inflated in chunks of 1 MiB, never more than ``limit`` of them."""
+    inflater, out, rest = zlib.decompressobj(), bytearray(), body
+    try:
+        while rest and len(out) <= limit:
+            out += inflater.decompress(rest, 2**20)
+            rest = inflater.unconsumed_tail
+    except zlib.error as e:
+        raise DataFormatError(path, f"a compressed element at byte {at} that inflates", f"{e}") from None
+    if len(out) > limit:
+        raise DataFormatError(path, f"elements of at most {describe(limit)} inflated (the cap {LIMIT_ENV})",
+                              f"the element at byte {at} inflating past it")
+    return bytes(out)
+
+
+def _mat_plain(path: str, raw: bytes, limit: int) -> bytes:
+    """The MAT-file ``raw`` with every compressed element inflated (within ``limit`` in all) and every element's
+    byte count checked against what holds it (:func:`_mat_elements`), for scipy to read with no size unchecked.
+    Only version 5 files are read (scipy would read other headers as version 4)."""
+    if len(raw) < 128 or not raw.startswith(b"MATLAB 5.0") or raw[126:128] not in (b"IM", b"MI"):
+        raise DataFormatError(path, "a MATLAB 5.0 MAT-file header (128 bytes)", repr(raw[:20]))
+    end, pos, out = ("<" if raw[126:128] == b"IM" else ">"), 128, bytearray(raw[:128])
+    while pos + 8 <= len(raw):
+        kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
+        if kind >> 16 or pos + 8 + size > len(raw):
+            raise DataFormatError(path, f"an element of at most {len(raw) - pos - 8} bytes at byte {pos}",
+                                  f"the tag of type {kind & 0xFFFF}, {size} bytes")
+        if kind == 15:  # miCOMPRESSED: one element, compressed
+            element = _inflate(path, raw[pos + 8:pos + 8 + size], pos, limit - len(out))
+            pos += 8 + size
+        else:
+            element = raw[pos:pos + 8 + size + (-size % 8)]
+            pos += 8 + size + (-size % 8)
+        _mat_elements(path, element, 0, len(element), end)
+        out += element + bytes(-len(element) % 8)
+    return bytes(out)
 
 
 def read_mat_array(path: str, name: str) -> np.ndarray:
-    """The real numeric array ``name`` of a MATLAB v5 ``.mat`` file, as float64 in C order (MATLAB stores it in
-    Fortran order). Reads compressed (``miCOMPRESSED``) and plain ``miMATRIX`` elements of numeric classes; raises
-    :class:`polyjax.DataFormatError` naming the file for anything else (v7.3/HDF5 files, complex data, structs)."""
-    with open(path, "rb") as fh:
-        raw = fh.read()
-    if len(raw) < 128 or not raw[:10].startswith(b"MATLAB 5.0"):
-        raise DataFormatError(path, "a MATLAB 5.0 MAT-file header", repr(raw[:10]))
-    end = "<" if raw[126:128] == b"IM" else ">"
-    pos, found = 128, []
-    while pos + 8 <= len(raw):
-        kind, size = struct.unpack(end + "II", raw[pos:pos + 8])
-        body, pos = raw[pos + 8:pos + 8 + size], pos + 8 + size + (-size % 8 if kind != 15 else 0)
-        if kind == 15:
-            try:
-                body = zlib.decompress(body)
-            except zlib.error as e:
-                raise DataFormatError(path, "a compressed element that decompresses", f"{e}") from None
-            kind, size = struct.unpack(end + "II", body[:8])
-            body = body[8:8 + size]
-        if kind == 14:
-            arr_name, arr = _mat_matrix(path, body, end)
-            found.append(arr_name)
-            if arr_name == name:
-                return arr
-    raise DataFormatError(path, f"a variable {name!r}", f"{found}")
-
-
-def _mat_subelements(body: bytes, end: str):
-    """The ``(type, bytes)`` sub-elements of a ``miMATRIX`` element (small ones packed in 4 bytes)."""
-    pos, out = 0, []
-    while pos + 8 <= len(body):
-        kind, size = struct.unpack(end + "II", body[pos:pos + 8])
-        if kind >> 16:  # small data element: size in the upper half, data in the next 4 bytes
-            kind, size = kind & 0xFFFF, kind >> 16
-            out.append((kind, body[pos + 4:pos + 4 + size]))
-            pos += 8
-        else:
-            out.append((kind, body[pos + 8:pos + 8 + size]))
-            pos += 8 + size + (-size % 8)
-    return out
-
-
-def _mat_matrix(path, body, end):
-    """``(name, array)`` of one ``miMATRIX`` element of a numeric class."""
-    parts = _mat_subelements(body, end)
-    if len(parts) < 4:
-        raise DataFormatError(path, "a matrix element of flags, dims, name, data", f"{len(parts)} parts")
-    flags = struct.unpack(end + "I", parts[0][1][:4])[0]
-    name = parts[2][1].decode("ascii", "replace")
-    if not 6 <= (flags & 0xFF) <= 15 or flags & 0x800 or len(parts) != 4:
-        return name, None  # not a real numeric array
-    dims = np.frombuffer(parts[1][1], end + "i4")
-    kind, data = parts[3]
-    if kind not in _MAT_TYPES:
-        raise DataFormatError(path, f"variable {name!r} of a numeric MAT type", f"type {kind}")
-    values = np.frombuffer(data, end + _MAT_TYPES[kind]).astype(np.float64)
-    if values.size != int(np.prod(dims)):
-        raise DataFormatError(path, f"variable {name!r} of shape {tuple(dims)}", f"{values.size} values")
-    return name, np.ascontiguousarray(values.reshape(tuple(dims), order="F"))
+    """The real numeric array ``name`` of a MATLAB v5 ``.mat`` file, as float64 in C order, read by
+    ``scipy.io.loadmat``. Sizes are checked first: the file's against the input cap (``POLYJAX_MAX_INPUT_MB``),
+    what its compressed elements inflate to (in chunks, within the cap), every element's byte count against what
+    holds it, and the variable's declared shape against the cap and the bytes held. Raises
+    :class:`polyjax.DataFormatError` naming the file for anything else (v7.3/HDF5 files, complex data, structs,
+    damaged elements)."""
+    limit = input_limit()
+    raw = _mat_plain(path, read_bytes(path, limit, "a MATLAB MAT-file"), limit)
+    held = len(raw)
+    shapes = _mat_shapes(path, raw)
+    if name not in shapes:
+        raise DataFormatError(path, f"a variable {name!r}", f"{sorted(shapes)}")
+    shape, cls = shapes[name]
+    count = int(np.prod(shape, dtype=object))
+    if 8 * count > limit or count > held:
+        raise DataFormatError(path, f"variable {name!r} of at most {describe(limit)} as float64 (the cap "
+                              f"{LIMIT_ENV}) and at most one value a byte its elements hold ({held})",
+                              f"the shape {shape} ({describe(8 * count)})")
+    try:
+        arr = scipy.io.loadmat(io.BytesIO(raw), variable_names=[name], squeeze_me=False)[name]
+    except MemoryError:
+        raise
+    except Exception as e:  # noqa: BLE001  (scipy's parser raises many kinds on a damaged file: each is named here)
+        raise DataFormatError(path, f"a readable variable {name!r}", f"{type(e).__name__}: {e}") from None
+    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "biuf" or arr.shape != shape:
+        raise DataFormatError(path, f"variable {name!r}: a real numeric array of shape {shape}",
+                              f"{cls} {getattr(arr, 'dtype', type(arr).__name__)} {getattr(arr, 'shape', '')}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
 
 
 def _text_rows(path: str, cols: int | None) -> list:
@@ -140,8 +242,7 @@ def _text_rows(path: str, cols: int | None) -> list:
     if not os.path.isfile(path):
         raise DataNotFoundError(f"{path}: file not found (a DiLiGenT object folder holds filenames.txt, "
                                 "light_directions.txt, light_intensities.txt, mask.png and the images)")
-    with open(path) as fh:
-        lines = [ln.strip() for ln in fh if ln.strip()]
+    lines = [ln.strip() for ln in read_text(path, None, "a text file of the capture").splitlines() if ln.strip()]
     if cols is None:
         return lines
     try:

@@ -9,7 +9,8 @@ Layout (little-endian):
 - each field's data, C order, at its offset.
 
 :func:`read_tensor_file` checks every byte count against the file's size before reading, so a truncated or foreign
-file is a :class:`polyjax.DataFormatError` naming the file, never a short read.
+file is a :class:`polyjax.DataFormatError` naming the file, never a short read; the file itself is read only when its
+size is within the input cap (``POLYJAX_MAX_INPUT_MB``), and a field with a zero-sized dimension is refused.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataNotFoundError
+from .._reading.bounded import read_bytes
 from ._errors import EmptyFileError, HeaderError, TruncatedFileError, WrongFormatError
 
 MAGIC = b"tensor_file\0"
@@ -52,7 +54,7 @@ def _read_bytes(path) -> tuple[Path, bytes]:
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"{path}: no such tensor file (a Mitsuba/RGL-EPFL '.bsdf' file)")
-    data = path.read_bytes()
+    data = read_bytes(path, what="a Mitsuba tensor_file")
     if not data:
         raise EmptyFileError(path, "a Mitsuba tensor_file", "an empty file (0 bytes)")
     if len(data) < len(MAGIC) + 6:
@@ -81,6 +83,8 @@ def _read_field(cur: _Cursor, index: int):
     if code not in DTYPES:
         raise HeaderError(path, f"a tensor_file dtype code {sorted(DTYPES)} for field {name!r}", f"code {code}")
     shape = tuple(cur.uint(8, f"the shape of field {name!r}") for _ in range(ndim))
+    if 0 in shape:
+        raise HeaderError(path, f"a field {name!r} of at least one value in each dimension", f"the shape {shape}")
     dtype = np.dtype(DTYPES[code])
     nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
     if offset + nbytes > len(cur.data):

@@ -24,6 +24,8 @@ from .._arrays import device_array
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._files import inside_folder, write_bytes_atomically, write_npz_atomically
 from .._model import PolynomialBRDF
+from .._reading.bounded import load_json, read_npz
+from .._reading.model import check_polynomial_fields
 from ._exr import channel_layout, read_exr_shard, write_exr_shard
 
 MANIFEST = "manifest.json"
@@ -134,9 +136,11 @@ def _read_manifest(d: Path, fmt: str | None) -> tuple[dict, str]:
     path = d / MANIFEST
     if not path.is_file():
         raise DataNotFoundError(f"expected a texture manifest {MANIFEST} in {str(d)!r}; none there")
-    meta = json.loads(path.read_text())
-    if meta.get("format") not in _READABLE:
-        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format")))
+    meta = load_json(path, f"a texture manifest ({FORMAT})")
+    if not isinstance(meta, dict) or meta.get("format") not in _READABLE:
+        raise DataFormatError(path, f"format {FORMAT!r}", repr(meta.get("format") if isinstance(meta, dict)
+                                                               else meta)[:80])
+    _check_manifest(path, meta)
     have = meta.get("formats", ["npz"])
     fmt = have[0] if fmt is None else fmt
     if fmt not in have:
@@ -144,12 +148,59 @@ def _read_manifest(d: Path, fmt: str | None) -> tuple[dict, str]:
     return meta, fmt
 
 
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _check_manifest(path: Path, meta: dict) -> None:
+    """The manifest's structure, checked before any shard is read: a positive ``height``, a list of formats, a
+    dict of fields, and shards of ``rows [start, stop]`` within the height naming a file (per format) each."""
+    def bad(what, found):
+        raise DataFormatError(path, what, repr(found)[:80])
+
+    height = meta.get("height")
+    if not _is_int(height) or height < 1:
+        bad("'height': a positive integer", height)
+    formats = meta.get("formats", ["npz"])
+    if not isinstance(formats, list) or not formats or any(f not in FORMATS for f in formats):
+        bad(f"'formats': a list of {FORMATS}", formats)
+    if not isinstance(meta.get("fields", {}), dict):
+        bad("'fields': an object", meta.get("fields"))
+    shards = meta.get("shards")
+    if not isinstance(shards, list) or not shards:
+        bad("'shards': a non-empty list", shards)
+    for i, shard in enumerate(shards):
+        rows = shard.get("rows") if isinstance(shard, dict) else None
+        if not (isinstance(rows, list) and len(rows) == 2 and all(map(_is_int, rows))
+                and 0 <= rows[0] < rows[1] <= height):
+            bad(f"shards[{i}].rows: [start, stop] with 0 <= start < stop <= height {height}", rows)
+        files = shard.get("files", {"npz": shard.get("file")})
+        if not isinstance(files, dict) or not all(isinstance(files.get(f), str) for f in formats):
+            bad(f"shards[{i}]: a file name for each format {formats}", files)
+
+
 def _read_npz_shard(f: Path, rows: int) -> dict[str, np.ndarray]:
-    with np.load(f) as z:
-        for n in _FIELDS:
-            if n not in z or z[n].shape[0] != rows:
-                raise DataFormatError(f, f"field {n!r} with {rows} rows", f"{z[n].shape if n in z else 'none'}")
-        return {n: z[n] for n in _FIELDS}
+    z = read_npz(f, "an .npz texture shard")
+    for n in _FIELDS:
+        if n not in z or z[n].ndim < 1 or z[n].shape[0] != rows:
+            raise DataFormatError(f, f"field {n!r} with {rows} rows", f"{z[n].shape if n in z else 'none'}")
+    return {n: z[n] for n in _FIELDS}
+
+
+def _covering(path: Path, meta: dict, lo: int, hi: int) -> list:
+    """The shards of the manifest covering rows ``lo .. hi``, in order; a DataFormatError when they overlap or
+    leave a gap."""
+    shards = sorted((s for s in meta["shards"] if s["rows"][1] > lo and s["rows"][0] < hi), key=lambda s: s["rows"])
+    at = lo
+    for s in shards:
+        a, b = s["rows"]
+        if a > at or b <= at:
+            raise DataFormatError(path, f"shards covering rows {lo} to {hi} once each",
+                                  f"rows {a} to {b} after row {at}")
+        at = b
+    if at < hi:
+        raise DataFormatError(path, f"shards covering rows {lo} to {hi}", f"none beyond row {at}")
+    return shards
 
 
 def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | None = None,
@@ -166,24 +217,55 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
     """
     d = Path(directory)
     meta, fmt = _read_manifest(d, format)
-    lo, hi = (0, meta["height"]) if rows is None else rows
+    lo, hi = (0, meta["height"]) if rows is None else _checked_rows(rows, meta["height"])
     pieces = {n: [] for n in _FIELDS}
-    for shard in meta["shards"]:
+    for shard in _covering(d / MANIFEST, meta, lo, hi):
         a, b = shard["rows"]
-        if b <= lo or a >= hi:
-            continue
-        f = inside_folder(d, shard.get("files", {"npz": shard["file"]})[fmt], d / MANIFEST, f"shard rows {a}-{b}")
+        f = inside_folder(d, shard.get("files", {"npz": shard.get("file")})[fmt], d / MANIFEST, f"shard rows {a}-{b}")
         if not f.is_file():
             raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(d / MANIFEST)!r}; it is "
                                     "missing")
-        got = _read_npz_shard(f, b - a) if fmt == "npz" else read_exr_shard(f, meta["fields"], b - a)
+        got = _read_npz_shard(f, b - a) if fmt == "npz" else _read_exr(d / MANIFEST, f, meta, b - a)
         for n in _FIELDS:
             pieces[n].append(got[n][max(lo, a) - a: min(hi, b) - a])
+    return _texture(d / MANIFEST, meta, pieces)
+
+
+def _checked_rows(rows, height: int) -> tuple[int, int]:
+    try:
+        lo, hi = (int(r) for r in rows)
+    except (TypeError, ValueError):
+        lo, hi = -1, -1
+    if not 0 <= lo < hi <= height:
+        raise InputError(f"rows: expected (start, stop) with 0 <= start < stop <= {height} (the texture's height), "
+                         f"found {rows!r}")
+    return lo, hi
+
+
+def _read_exr(manifest: Path, f: Path, meta: dict, rows: int) -> dict[str, np.ndarray]:
+    """An EXR shard's fields, the manifest's layout of them checked (a missing or mistyped entry named)."""
+    try:
+        return read_exr_shard(f, {n: meta["fields"][n] for n in _FIELDS}, rows)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:
+        if isinstance(e, DataFormatError):
+            raise
+        raise DataFormatError(manifest, "the EXR layout of every field ('fields')",
+                              f"{type(e).__name__}: {e}") from None
+
+
+def _texture(manifest: Path, meta: dict, pieces: dict) -> PolynomialBRDF:
+    """The model of the rows read, its fields and the manifest's static description checked together."""
     arrays = {n: np.concatenate(p, axis=0) for n, p in pieces.items()}
-    return PolynomialBRDF(**{n: device_array(a) for n, a in arrays.items()}, variables=meta["variables"],
-                          basis=meta["basis"], interactions=bool(meta["interactions"]),
-                          max_degree=int(meta["max_degree"]), link=meta.get("link", "identity"),
-                          eps=float(meta.get("eps", 0.0)), clamp=bool(meta.get("clamp", False)))
+    static = dict(variables=meta.get("variables"), basis=meta.get("basis"), interactions=meta.get("interactions"),
+                  max_degree=meta.get("max_degree"), link=meta.get("link", "identity"), eps=meta.get("eps", 0.0),
+                  clamp=meta.get("clamp", False))
+    try:
+        check_polynomial_fields(manifest, static, arrays)
+        return PolynomialBRDF(**{n: device_array(a) for n, a in arrays.items()}, **static)
+    except (TypeError, ValueError) as e:
+        if isinstance(e, DataFormatError):
+            raise
+        raise DataFormatError(manifest, "the shards of a polynomial texture", f"{type(e).__name__}: {e}") from None
 
 
 def local_part(model: PolynomialBRDF) -> PolynomialBRDF:
