@@ -6,6 +6,7 @@ textures (normal map, material maps: :func:`write_capture_textures`) and its ``.
 from ._capture_textures import write_capture_textures
 from ._card import gltf_card
 from ._card_maps import CardMaps, card_maps
+from ._card_render import render_card
 from ._ggx import GGXLobes, fit_ggx_lobes, ggx_specular
 from ._glsl import brdf_explorer, glsl, numpy_function
 from ._gltf import gltf
@@ -21,5 +22,5 @@ from ._usd import usd
 __all__ = ["CardMaps", "GGXLobes", "brdf_explorer", "card_maps", "choose_mitsuba_plugin", "decode_normals",
            "encode_normals", "fit_ggx_lobes", "ggx_specular", "glsl", "gltf", "gltf_card", "materialx",
            "merl_binary", "mitsuba_bsdf", "mitsuba_xml", "normal_map", "numpy_function", "png_bytes",
-           "register_mitsuba_bsdf", "srgb_encode", "tabulate_merl", "usd", "write_capture_textures",
+           "register_mitsuba_bsdf", "render_card", "srgb_encode", "tabulate_merl", "usd", "write_capture_textures",
            "write_texture"]
