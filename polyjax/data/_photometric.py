@@ -10,8 +10,9 @@ CVPR 2016 / TPAMI 2019) stores each object in a folder ``pmsData/<object>PNG/``:
   linear PNGs (every image of one depth) are read as ``value / 255``, their quantisation step ``1 / 255`` recorded
   on the capture (:attr:`polyjax.Capture.quantisation`);
 - ``mask.png``: object pixels non-zero;
-- normals (optional: without them the capture's ``normals`` is None): ``Normal_gt.mat`` (MATLAB v5, variable ``Normal_gt``, ``(H, W, 3)``) or ``normal.txt`` (``H W`` rows of
-  ``x y z``, row-major), unit vectors in the camera frame;
+- normals (optional: without them the capture's ``normals`` is None; mask pixels whose normal is the zero
+  vector, unknown, leave the mask): ``Normal_gt.mat`` (MATLAB v5, variable ``Normal_gt``, ``(H, W, 3)``) or
+  ``normal.txt`` (``H W`` rows of ``x y z``, row-major), unit vectors in the camera frame;
 - the camera is orthographic and looks along ``-z`` of that frame: the view direction is ``(0, 0, 1)`` everywhere.
 
 16-bit PNGs are read by pypng (Pillow would truncate them to 8 bits), the ``.mat`` file by :func:`read_mat_array`
@@ -197,7 +198,7 @@ def _normals(folder: str, shape, mask) -> np.ndarray | None:
     if n.shape != (shape[0], shape[1], 3):
         raise DataFormatError(path, f"normals of shape {(shape[0], shape[1], 3)}", f"{n.shape}")
     length = np.linalg.norm(n, axis=-1)
-    bad = mask & ~(np.abs(length - 1.0) <= 1e-3)
+    bad = mask & ~(np.abs(length - 1.0) <= 1e-3) & (length > 0)  # zero: no normal known there
     if np.any(bad):
         i, j = np.argwhere(bad)[0]
         raise DataFormatError(path, "unit normals on the mask", f"{int(bad.sum())} that are not (pixel ({i}, {j}) "
@@ -220,7 +221,8 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
     Raises:
         DataNotFoundError: the folder, a light file, the mask or an image is missing.
         DataFormatError: light files of other lengths than ``filenames.txt``, an image that is not RGB of the
-            mask's size and of the first image's depth (16 or 8 bits), normals not of unit length on the mask, a malformed file (each naming the file).
+            mask's size and of the first image's depth (16 or 8 bits), normals not of unit length on the mask, a
+            malformed file (each naming the file).
         InputError: light indices out of range.
     """
     folder = os.fspath(folder)
@@ -233,6 +235,9 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
     mask = read_png(mask_path, bits=None)
     mask = (mask.max(axis=-1) if mask.ndim == 3 else mask) > 0
     normals = _normals(folder, mask.shape, mask)
+    if normals is not None:  # mask pixels whose normal is a zero vector (unknown) leave the mask
+        mask = mask & (np.linalg.norm(normals, axis=-1) > 0.5)
+        normals = np.where(mask[..., None], normals, np.array([0.0, 0.0, 1.0]))
     bits = _bit_depth(os.path.join(folder, names[0]))
     for name in names:  # every header before any image is decoded
         check_png_header(os.path.join(folder, name), bits, mask.shape, 3)
