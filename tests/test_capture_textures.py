@@ -32,7 +32,7 @@ validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {uri: path.basena
   .then((r) => console.log(JSON.stringify(r.issues)))
   .catch((e) => { console.error(String(e)); process.exit(1); });
 """
-ROUGHNESS, AMPLITUDE = (0.3, 0.65), ((0.9, 0.6, 0.3), (0.04, 0.04, 0.04))
+ROUGHNESS, AMPLITUDE, OFFSET = (0.3, 0.65), ((0.9, 0.6, 0.3), (0.01, 0.01, 0.01)), ((0.0, 0.0, 0.0), (-0.05, 0.0, 0.05))
 
 
 class GGXCaptureFit(eqx.Module):
@@ -45,12 +45,12 @@ class GGXCaptureFit(eqx.Module):
 
     def lobes(self, u, v):
         g = pj.export.ggx_specular(u, v, jnp.asarray(ROUGHNESS))  # (K, n)
-        return jnp.asarray(AMPLITUDE)[:, None, :] * g[..., None]
+        return jnp.asarray(AMPLITUDE)[:, None, :] * g[..., None] + jnp.asarray(OFFSET)[:, None, :] / jnp.pi
 
 
 def _synthetic_fit(h=24, w=32) -> GGXCaptureFit:
     """A hemisphere seen from above (normals (x, y, sqrt(1 - r^2)), y up, row 0 at the top), its left half a
-    dielectric (lobe 1), its right half a metal (lobe 0)."""
+    dielectric (lobe 1: F0 0.01, and a lobe that shifts the diffuse colour), its right half a metal (lobe 0)."""
     y, x = np.meshgrid(np.linspace(1, -1, h), np.linspace(-w / h, w / h, w), indexing="ij")
     r2 = x * x + y * y
     mask = r2 < 0.95
@@ -95,10 +95,12 @@ def test_normal_map_round_trips_within_quantisation(tmp_path):
 
 def test_ggx_fit_recovers_the_lobe_it_was_made_from():
     fit = _synthetic_fit()
-    lobes = pj.export.fit_ggx_lobes(fit.lobes)
-    assert np.allclose(np.asarray(lobes.roughness), ROUGHNESS, atol=2e-3)
-    assert np.allclose(np.asarray(lobes.amplitude), AMPLITUDE, rtol=1e-2)
-    assert np.all(np.asarray(lobes.relative_l2) < 1e-2)
+    for directions in (None, pj.export.capture_directions(fit.normals, fit.mask, 4096)):
+        lobes = pj.export.fit_ggx_lobes(fit.lobes, directions=directions)
+        assert np.allclose(np.asarray(lobes.roughness), ROUGHNESS, atol=2e-3)
+        assert np.allclose(np.asarray(lobes.amplitude), AMPLITUDE, rtol=1e-2)
+        assert np.allclose(np.asarray(lobes.offset), OFFSET, atol=1e-4)
+        assert np.all(np.asarray(lobes.relative_l2) < 1e-2)
     # a lobe of another shape (Blinn-Phong microfacet, exponent 40: Beckmann alpha = sqrt(2 / 42), roughness 0.467)
     # fits a GGX roughness a little wider (measured 0.552: GGX's longer tail) and says how far it is from GGX
     e = 40.0
@@ -125,7 +127,8 @@ def test_card_maps_a_metal_and_a_dielectric():
     assert maps.scale == 1.0
     assert np.allclose(np.asarray(maps.metallic)[metal], 1.0) and np.allclose(np.asarray(maps.metallic)[plastic], 0.0)
     assert np.allclose(np.asarray(maps.base_color)[metal], AMPLITUDE[0], atol=0.01)
-    assert np.allclose(np.asarray(maps.base_color)[plastic], [0.2, 0.5, 0.8], atol=1e-6)
+    assert np.allclose(np.asarray(maps.base_color)[plastic], [0.15, 0.5, 0.85], atol=1e-3)  # diffuse + offset
+    assert np.allclose(np.asarray(maps.specular)[plastic], 0.25, atol=3e-3)  # F0 0.01 = 0.04 x 0.25
     assert np.allclose(np.asarray(maps.roughness)[metal], ROUGHNESS[0], atol=2e-3)
     assert np.allclose(np.asarray(maps.roughness)[plastic], ROUGHNESS[1], atol=2e-3)
     with pytest.raises(pj.InputError, match="capture fit"):
@@ -169,7 +172,8 @@ def test_gltf_card_passes_the_khronos_validator(validator, tmp_path, crop):
     assert mat["alphaMode"] == "MASK" and mat["normalTexture"] == {"index": 2}
     pbr = mat["pbrMetallicRoughness"]
     assert pbr["baseColorTexture"] == {"index": 0} and pbr["metallicRoughnessTexture"] == {"index": 1}
-    assert [i["mimeType"] for i in doc["images"]] == ["image/png"] * 3
+    assert [i["mimeType"] for i in doc["images"]] == ["image/png"] * 4
+    assert mat["extensions"] == {"KHR_materials_specular": {"specularColorTexture": {"index": 3}}}
     assert doc["cameras"][0]["orthographic"]["xmag"] == pytest.approx(32 / 24)
     pos = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
     width = pos["max"][0] - pos["min"][0]

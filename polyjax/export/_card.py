@@ -8,7 +8,9 @@ frame of :attr:`polyjax.Capture.scenes`); the quad covers the mask's bounding bo
 its normal ``(0, 0, 1)``, tangent ``(1, 0, 0, 1)`` and texture coordinates ``u`` rightwards, ``v`` downwards, so that
 texel ``(row, column)`` of the maps lies over pixel ``(row, column)`` and the normal texture's tangent space is the
 camera frame. The camera node at ``(0, 0, 2)`` looks along ``-z`` (glTF's default), orthographic with ``ymag = 1``,
-``xmag = W / H``. The base colour's alpha is the mask (``alphaMode: MASK``, cutoff 0.5).
+``xmag = W / H``. The base colour's alpha is the mask (``alphaMode: MASK``, cutoff 0.5). A dielectric's specular
+weight (:class:`~polyjax.export.CardMaps` ``specular``: ``F0 = 0.04 k``) is ``KHR_materials_specular``'s
+``specularColorTexture`` (sRGB, grey), the one input of that extension Blender 3.4's importer reads.
 
 The card records under ``asset.extras.polyjax``: ``lightScale`` (:class:`~polyjax.export.CardMaps` ``scale``: a
 directional light of the capture's irradiance ``E`` is rendered with ``lightScale * E``), the image size and the
@@ -60,7 +62,8 @@ def _textures(maps: CardMaps, rows: slice, cols: slice) -> list[bytes]:
     mr = np.stack([np.ones(m.shape), np.asarray(maps.roughness)[rows, cols], np.asarray(maps.metallic)[rows, cols]],
                   -1)
     normals = encode_normals(np.asarray(maps.normals)[rows, cols], m)
-    return [png_bytes(base, srgb=True), png_bytes(mr), png_bytes(normals)]
+    spec = np.repeat(np.asarray(maps.specular)[rows, cols][..., None], 3, -1)
+    return [png_bytes(base, srgb=True), png_bytes(mr), png_bytes(normals), png_bytes(spec, srgb=True)]
 
 
 def _buffers(quad: dict, images: list[bytes]) -> tuple[list, list, dict, bytes]:
@@ -101,7 +104,8 @@ def _document(maps: CardMaps, rows: slice, cols: slice, name: str) -> tuple[dict
     material = {"name": name, "alphaMode": "MASK", "alphaCutoff": 0.5,
                 "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1},
                                          "metallicFactor": 1.0, "roughnessFactor": 1.0},
-                "normalTexture": {"index": 2}}
+                "normalTexture": {"index": 2},
+                "extensions": {"KHR_materials_specular": {"specularColorTexture": {"index": 3}}}}
     doc = {
         "asset": {"version": "2.0", "generator": "polyjax", "extras": extras},
         "scene": 0, "scenes": [{"nodes": [0, 1]}],
@@ -110,10 +114,10 @@ def _document(maps: CardMaps, rows: slice, cols: slice, name: str) -> tuple[dict
                                                               "zfar": 10.0}}],
         "meshes": [{"name": name, "primitives": [{"attributes": attributes, "indices": len(accessors) - 1,
                                                   "material": 0}]}],
-        "materials": [material],
+        "materials": [material], "extensionsUsed": ["KHR_materials_specular"],
         "samplers": [{"magFilter": _LINEAR, "minFilter": _LINEAR, "wrapS": _CLAMP, "wrapT": _CLAMP}],
-        "images": [{"bufferView": first_image + i, "mimeType": "image/png"} for i in range(3)],
-        "textures": [{"sampler": 0, "source": i} for i in range(3)],
+        "images": [{"bufferView": first_image + i, "mimeType": "image/png"} for i in range(4)],
+        "textures": [{"sampler": 0, "source": i} for i in range(4)],
         "buffers": [{"byteLength": len(binary)}], "bufferViews": views, "accessors": accessors,
     }
     return doc, binary

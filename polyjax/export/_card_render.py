@@ -7,8 +7,10 @@ Per pixel, with the card's normal ``n`` (its normal map), view ``v = (0, 0, 1)``
 (:func:`polyjax.export.ggx_specular`):
 
 .. math::
-    f = (1 - M)\,\big[(1 - F_d)\,c/\pi + F_d\,D V\big] + M\,F_m\,D V, \qquad F_d = 0.04 + 0.96\,x, \quad
-    F_m = c + (1 - c)\,x,
+    f = (1 - M)\,\big[(1 - F_d)\,c/\pi + F_d\,D V\big] + M\,F_m\,D V, \qquad F_d = 0.04 k + (1 - 0.04 k)\,x,
+    \quad F_m = c + (1 - c)\,x,
+
+``k`` the card's specular weight (``KHR_materials_specular``: dielectric ``F0 = 0.04 k``, ``F90 = 1``),
 
 and the pixel is ``scale E max(0, n . l) f`` (``E`` the capture's irradiance, ``scale`` the card's light scale), 0
 off the mask: in the capture's camera units.
@@ -52,7 +54,8 @@ def render_card(maps: CardMaps, direction: ArrayLike, irradiance: ArrayLike = 1.
     nh, x = np.maximum(n @ half, 0.0), (1.0 - max(float(view @ half), 0.0)) ** 5
     dv = _ggx(nl, nv, nh, np.asarray(maps.roughness, np.float64))[..., None]
     c, metal = np.asarray(maps.base_color, np.float64), np.asarray(maps.metallic, np.float64)[..., None]
-    fd = 0.04 + 0.96 * x
+    f0 = 0.04 * np.asarray(maps.specular, np.float64)[..., None]
+    fd = f0 + (1.0 - f0) * x
     f = (1.0 - metal) * ((1.0 - fd) * c / np.pi + fd * dv) + metal * (c + (1.0 - c) * x) * dv
     e = np.broadcast_to(np.asarray(irradiance, np.float64), (3,))
     image = maps.scale * e * nl[..., None] * f

@@ -8,11 +8,14 @@ With ``alpha = roughness^2``, ``h`` the half vector of the local light ``u`` and
     V = \frac{1}{2\,(u_z\sqrt{v_z^2(1-\alpha^2)+\alpha^2} + v_z\sqrt{u_z^2(1-\alpha^2)+\alpha^2})},
 
 and the specular BRDF is ``F D V`` with Schlick's ``F = F0 + (1 - F0)(1 - v.h)^5``. The fit factors the reflectance
-out: a lobe ``f_k(u, v)`` (RGB) is matched by ``a_k D V`` (``a_k`` RGB, ``>= 0``), in the L2 of paper equation (11)
-(residuals weighted by ``cos theta_u``, both directions within 80 degrees of the normal), at random direction pairs
-of which a quarter lie near the mirror direction. For each roughness of a grid the amplitudes are the closed-form
-least-squares solution (one column per channel); the roughness is the grid's best, refined on a finer grid around
-it (steps of about ``1e-4``). ``a_k`` then plays glTF's ``F0`` at normal incidence (Schlick's rise towards grazing
+out: a lobe ``f_k(u, v)`` (RGB) is matched by ``a_k D V + b_k / pi`` (``a_k >= 0`` and ``b_k`` RGB: a lobe fitted to
+photographs may also lift or lower the diffuse level, ``b_k`` of either sign, which the texel's diffuse albedo takes
+over), in the L2 of paper equation (11) (residuals weighted by ``cos theta_u``, both directions within 80 degrees of
+the normal). The direction pairs are either random (a quarter of the views near the mirror direction) or, for a
+capture fit, those a capture sees (:func:`capture_directions`: the lobes were fitted there, and a fitted
+polynomial lobe means nothing far outside). For each roughness of a grid the amplitudes are the closed-form
+least-squares solution (two columns per channel, QR); the roughness is the grid's best, refined on a finer grid around
+it (steps of about ``2e-4``). ``a_k`` then plays glTF's ``F0`` at normal incidence (Schlick's rise towards grazing
 angles, which the fitted lobe may or may not show, is the glTF model's own).
 """
 
@@ -50,11 +53,13 @@ class GGXLobes(eqx.Module):
     Attributes:
         roughness: ``(K,)`` glTF roughness (``alpha = roughness^2``).
         amplitude: ``(K, 3)`` RGB factor ``a_k`` of ``D V`` (glTF's ``F0`` of the lobe).
+        offset: ``(K, 3)`` RGB diffuse offset ``b_k`` (the lobe's share of the diffuse albedo).
         relative_l2: ``(K,)`` the fit's L2 (equation (11), channels pooled) over the lobe's own L2.
     """
 
     roughness: Float[Array, " k"]
     amplitude: Float[Array, "k 3"]
+    offset: Float[Array, "k 3"]
     relative_l2: Float[Array, " k"]
 
 
@@ -75,29 +80,72 @@ def _directions(n: int, seed: int):
     return u, v
 
 
+def capture_directions(normals, mask, n: int, seed: int = 0):
+    """``n`` light/view pairs as a capture sees them, local to its normals: the view ``(0, 0, 1)`` of the camera
+    and a light uniform over the camera's front hemisphere (``z > 0``, as the lights of a photometric capture), at
+    pixels of ``mask`` drawn at random, in the frame of their normal ``(H, W, 3)``; pairs with either direction
+    below the surface are drawn again (at most 64 rounds)."""
+    rng = np.random.default_rng(seed)
+    n_px = np.asarray(normals, np.float64)[np.asarray(mask, bool)]
+    if n_px.size == 0:
+        raise InputError("mask: expected at least one pixel to draw the lobes' directions at")
+    us, vs, have = [], [], 0
+    for _ in range(64):
+        nrm = n_px[rng.integers(0, len(n_px), n)]
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+        light = rng.normal(size=(n, 3))
+        light[:, 2] = np.abs(light[:, 2])
+        light /= np.linalg.norm(light, axis=1, keepdims=True)
+        a = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+        tan = np.cross(a, nrm)
+        tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+        frame = np.stack([tan, np.cross(nrm, tan), nrm], 1)  # (n, 3, 3): rows t, b, n
+        u, v = np.einsum("pij,pj->pi", frame, light), frame[:, :, 2]
+        keep = (u[:, 2] > 1e-3) & (v[:, 2] > 1e-3)
+        us.append(u[keep])
+        vs.append(v[keep])
+        have += int(keep.sum())
+        if have >= n:
+            break
+    u, v = np.concatenate(us)[:n], np.concatenate(vs)[:n]
+    if len(u) < n:
+        raise InputError("normals: too few of them face the camera to draw the lobes' directions at")
+    return u, v
+
+
 @jax.jit
 def _grid_fit(u, v, f, roughness):
-    """Per lobe: the amplitudes ``(K, G, 3)`` and pooled weighted squared residuals ``(K, G)`` at each roughness of
-    the grid ``(G,)`` (``f (K, n, 3)``; the weights of equation (11): ``cos^2 theta_u`` within 80 degrees)."""
+    """Per lobe: the amplitudes ``(K, G, 3)``, diffuse offsets ``(K, G, 3)`` and pooled weighted squared
+    residuals ``(K, G)`` at each roughness of the grid ``(G,)`` (``f (K, n, 3)``; the weights of equation (11):
+    ``cos theta_u`` on the residual, within 80 degrees), and the lobes' own pooled squares ``(K,)``."""
     c = jnp.cos(jnp.radians(80.0))
-    w = jnp.where((u[:, 2] >= c) & (v[:, 2] >= c), u[:, 2] ** 2, 0.0)
+    w = jnp.where((u[:, 2] >= c) & (v[:, 2] >= c), u[:, 2], 0.0)
     g = ggx_specular(u, v, roughness)  # (G, n)
-    gg = jnp.einsum("n,gn,gn->g", w, g, g)
-    gf = jnp.einsum("n,gn,knc->kgc", w, g, f)
-    amp = jnp.maximum(gf / jnp.maximum(gg, 1e-300)[None, :, None], 0.0)
-    ff = jnp.einsum("n,knc->kc", w, f * f)
-    res = ff[:, None, :] - 2.0 * amp * gf + amp * amp * gg[None, :, None]
-    return amp, jnp.sum(res, -1), jnp.sum(ff, -1)
+    cols = jnp.stack([g * w, jnp.broadcast_to(w / jnp.pi, g.shape)], -1)  # (G, n, 2)
+    q, r = jnp.linalg.qr(cols)
+    rhs = w[None, :, None] * f  # (K, n, 3)
+    qb = jnp.einsum("gni,knc->kgic", q, rhs)
+    x = jax.scipy.linalg.solve_triangular(r[None, :, None], jnp.moveaxis(qb, 2, 3)[..., None], lower=False)[..., 0]
+    amp, off = x[..., 0], x[..., 1]  # (K, G, 3)
+    col = w / jnp.pi
+    alone = jnp.einsum("n,knc->kc", col, rhs)[:, None, :] / jnp.maximum(jnp.sum(col * col), 1e-300)
+    off = jnp.where(amp < 0, alone, off)  # a negative lobe: the offset alone (then b / pi = its mean)
+    amp = jnp.maximum(amp, 0.0)
+    pred = amp[:, :, None, :] * (g * w)[None, :, :, None] + off[:, :, None, :] * (w / jnp.pi)[None, None, :, None]
+    res = jnp.sum((rhs[:, None] - pred) ** 2, axis=(2, 3))
+    return amp, off, res, jnp.sum(rhs * rhs, axis=(1, 2))
 
 
-def fit_ggx_lobes(lobes, *, samples: int = 8192, seed: int = 0) -> GGXLobes:
-    """Fit glTF's GGX lobe (module notes) to each of ``K`` lobes.
+def fit_ggx_lobes(lobes, *, directions=None, samples: int = 8192, seed: int = 0) -> GGXLobes:
+    """Fit glTF's GGX lobe and a diffuse offset (module notes) to each of ``K`` lobes.
 
     Args:
         lobes: a callable ``lobes(u, v) -> (K, n, 3)`` (a capture fit's ``lobes``) or ``(n, 3)`` (one lobe) of the
             BRDF values at local unit directions ``u``, ``v`` ``(n, 3)``.
-        samples: direction pairs the lobes are tabulated at (at least 256).
-        seed: the directions' random seed.
+        directions: ``(u, v)``, the local direction pairs to fit at (e.g. :func:`capture_directions`); default
+            ``samples`` random pairs over the hemisphere.
+        samples: the number of random pairs (at least 256).
+        seed: their random seed.
 
     Returns:
         A :class:`GGXLobes` of the ``K`` fits.
@@ -109,18 +157,20 @@ def fit_ggx_lobes(lobes, *, samples: int = 8192, seed: int = 0) -> GGXLobes:
         raise InputError(f"lobes: expected a callable lobes(u, v) -> (K, n, 3), found {type(lobes).__name__}")
     if not isinstance(samples, int) or samples < 256:
         raise InputError(f"samples: expected an integer >= 256, found {samples!r}")
-    u, v = _directions(samples, seed)
+    u, v = _directions(samples, seed) if directions is None else (np.asarray(d, np.float64) for d in directions)
+    if u.ndim != 2 or u.shape[1] != 3 or v.shape != u.shape:
+        raise InputError(f"directions: expected two (n, 3) arrays, found {u.shape}, {v.shape}")
     f = np.asarray(lobes(jnp.asarray(u), jnp.asarray(v)), np.float64)
     f = f[None] if f.ndim == 2 else f
-    if f.ndim != 3 or f.shape[1:] != (samples, 3) or not np.isfinite(f).all():
-        raise InputError(f"lobes: expected finite values of shape (K, {samples}, 3), found {np.shape(f)}")
-    amp, res, own = _grid_fit(u, v, f, jnp.asarray(_COARSE))
-    best = _COARSE[np.argmin(np.asarray(res), axis=1)]  # (K,)
-    fine = np.clip(best[:, None] + _FINE[None, :], 0.01, 1.0)  # (K, F): each lobe its own grid
-    fits = [_grid_fit(u, v, f[k:k + 1], jnp.asarray(fine[k])) for k in range(f.shape[0])]
-    i = [int(np.argmin(np.asarray(r)[0])) for _, r, _ in fits]
-    roughness = np.array([fine[k, j] for k, j in enumerate(i)])
-    amplitude = np.stack([np.asarray(a)[0, j] for (a, _, _), j in zip(fits, i)])
-    res_best = np.array([max(float(np.asarray(r)[0, j]), 0.0) for (_, r, _), j in zip(fits, i)])
-    rel = np.sqrt(res_best / np.maximum(np.asarray(own), 1e-300))
-    return GGXLobes(jnp.asarray(roughness), jnp.asarray(amplitude), jnp.asarray(rel))
+    if f.ndim != 3 or f.shape[1:] != (len(u), 3) or not np.isfinite(f).all():
+        raise InputError(f"lobes: expected finite values of shape (K, {len(u)}, 3), found {np.shape(f)}")
+    res = np.asarray(_grid_fit(u, v, f, jnp.asarray(_COARSE))[2])
+    best = _COARSE[np.argmin(res, axis=1)]  # (K,)
+    out = []
+    for k in range(f.shape[0]):  # each lobe on its own fine grid
+        fine = np.clip(best[k] + _FINE, 0.01, 1.0)
+        amp, off, r, own = (np.asarray(x)[0] for x in _grid_fit(u, v, f[k:k + 1], jnp.asarray(fine)))
+        j = int(np.argmin(r))
+        out.append((fine[j], amp[j], off[j], np.sqrt(max(float(r[j]), 0.0) / max(float(own), 1e-300))))
+    rough, amp, off, rel = (np.stack(x) for x in zip(*out))
+    return GGXLobes(jnp.asarray(rough), jnp.asarray(amp), jnp.asarray(off), jnp.asarray(rel))
