@@ -21,6 +21,8 @@ import pytest
 
 import polyjax as pj
 import polyjax.render as pr
+from polyjax.cli import main
+from polyjax.internal import module_kind, register_model_kind
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE_MODULES = Path(os.environ.get("POLYJAX_NODE_MODULES", ROOT / ".ci" / "node" / "node_modules"))
@@ -223,3 +225,17 @@ def test_blender_renders_the_card_as_the_gltf_brdf(tmp_path):
     assert theirs.shape == ours.shape and ours.max() > 0.1
     assert float(pj.psnr(theirs, ours, peak=float(ours.max()), mask=m)) > 40.0
     assert float(pj.psnr(theirs[::-1], ours, peak=float(ours.max()), mask=m)) < 30.0
+
+
+def test_cli_exports_a_saved_capture_fit_as_a_card(validator, tmp_path, capsys):
+    """``polyjax export FIT --to gltf`` of a saved capture fit writes the card (the fit's class saved through a
+    model kind registered here, as ``polyjax.CaptureFit``'s is)."""
+    register_model_kind(module_kind(GGXCaptureFit, "test-ggx-capture-fit"))
+    src = pj.save_model(tmp_path / "fit.npz", _synthetic_fit())
+    out = tmp_path / "card.glb"
+    assert main(["export", str(src), "--to", "gltf", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "roughness 0.300, 0.650" in printed and f"wrote {out}" in printed
+    issues = validator(out)
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+    assert main(["export", str(src), "--to", "gltf", "--out", str(tmp_path / "card.gltf")]) == 2

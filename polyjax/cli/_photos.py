@@ -1,7 +1,9 @@
 """The ``polyjax fit-photos`` and ``polyjax relight`` commands: photographs under calibrated lights.
 
 ``polyjax fit-photos FOLDER --save model.npz`` fits the polynomial BRDF to a capture in DiLiGenT's layout
-(:func:`polyjax.data.load_photometric`, ``docs/photometric.md``); ``polyjax relight model.npz FOLDER --out DIR``
+(:func:`polyjax.data.load_photometric`, ``docs/photometric.md``); a capture without normals is fitted by
+:func:`polyjax.fit_capture` instead, and its normal map and material maps are written beside the saved fit
+(``<stem>_textures/``, :mod:`polyjax.cli._capture_out`); ``polyjax relight model.npz FOLDER --out DIR``
 predicts the capture's images under its lights and writes, per light, the prediction and its error as EXR (linear)
 and PNG (16-bit linear prediction, like the inputs; 8-bit error map), and prints the relative RMS and PSNR.
 """
@@ -21,6 +23,7 @@ from .._config import check_model_file, check_output_dir
 from .._errors import InputError
 from ..render._image import write_exr, write_png
 from ._args import add_model_options, spec_from_args
+from ._capture_out import run_capture_fit_photos
 
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model (clamped to
 #: the fitted box, so it stays bounded under lights unlike the fitted ones), then the fit's other options
@@ -82,6 +85,8 @@ def run_fit_photos(args) -> int:
     spec = spec_from_args(args)
     save = check_model_file(args.save, "--save")
     capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
+    if capture.normals is None:  # normals and a spatially varying BRDF; textures beside the fit
+        return run_capture_fit_photos(args, capture, save)
     t0 = time.perf_counter()
     model = pj.fit_polynomial_to_images(
         capture.scenes, capture.images, spec=spec, saturation=capture.saturation,
