@@ -97,7 +97,7 @@ def test_normal_map_round_trips_within_quantisation(tmp_path):
 
 def test_ggx_fit_recovers_the_lobe_it_was_made_from():
     fit = _synthetic_fit()
-    for directions in (None, pj.export.capture_directions(fit.normals, fit.mask, 4096)):
+    for directions in (None, pj.export.capture_directions(fit.normals, fit.mask, 8192)):
         lobes = pj.export.fit_ggx_lobes(fit.lobes, directions=directions)
         assert np.allclose(np.asarray(lobes.roughness), ROUGHNESS, atol=2e-3)
         assert np.allclose(np.asarray(lobes.amplitude), AMPLITUDE, rtol=1e-2)
