@@ -38,7 +38,7 @@ from .._model import PolynomialBRDF
 from .._results import RESULTS, raise_on_status
 from ._capture import Capture
 from ._capture import relight as relight_model
-from ._mix import fit_lobes, lobe_values, shade, solve_mix
+from ._mix import fit_lobes, lobe_table, lobe_values, shade, shade_table, solve_mix
 from ._normals import gauss_newton_normals, lambertian_normals
 
 #: the robust weights' Cauchy scale in noise units, and the noise floor in quantisation steps (measured:
@@ -134,9 +134,9 @@ def _start_block(obs, ok, directions):
     return n, rho, strength
 
 
-def _robust_weights(n, obs, ok, rho, mix, directions, lobes, floor):
+def _robust_weights(n, obs, ok, rho, mix, directions, table, floor):
     """Cauchy weights of a block's samples (module notes)."""
-    pred = jax.vmap(lambda ni, r, m: shade(ni, r, m, directions, lobes))(n, rho, mix)
+    pred = jax.vmap(lambda ni, r, m: shade_table(ni, r, m, directions, table))(n, rho, mix)
     r = obs - pred
     s = 1.4826 * jnp.median(jnp.abs(r), axis=(1, 2))
     z = r / jnp.maximum(s[:, None, None], floor[None])
@@ -144,13 +144,13 @@ def _robust_weights(n, obs, ok, rho, mix, directions, lobes, floor):
 
 
 @jax.jit
-def _iterate_block(n, obs, ok, w, directions, lobes, floor):
+def _iterate_block(n, obs, ok, w, directions, table, floor):
     """One alternation of a block: mix, normals, mix again, weights."""
-    rho, mix = solve_mix(n, obs, w, directions, lobes)
-    shade_fn = lambda ni, p: shade(ni, p[0], p[1], directions, lobes)  # noqa: E731
+    rho, mix = solve_mix(n, obs, w, directions, table)
+    shade_fn = lambda ni, p: shade_table(ni, p[0], p[1], directions, table)  # noqa: E731
     n2, _ = gauss_newton_normals(n, obs, w, shade_fn, (rho, mix))
-    rho, mix = solve_mix(n2, obs, w, directions, lobes)
-    w2 = _robust_weights(n2, obs, ok, rho, mix, directions, lobes, floor)
+    rho, mix = solve_mix(n2, obs, w, directions, table)
+    w2 = _robust_weights(n2, obs, ok, rho, mix, directions, table, floor)
     change = jnp.degrees(jnp.arccos(jnp.clip(jnp.sum(n * n2, -1), -1.0, 1.0)))
     return n2, rho, mix, w2, change
 
@@ -207,7 +207,8 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 6, tol_de
     block_fn = _fixed_block if use_normals else _iterate_block
     while done < iterations:
         done += 1
-        n, rho, mix, w, change = _blockwise(partial(block_fn, directions=directions, lobes=lobe_model, floor=floor),
+        table = lobe_table(lobe_model)
+        n, rho, mix, w, change = _blockwise(partial(block_fn, directions=directions, table=table, floor=floor),
                                             (n, obs, ok, w), n_px, block)
         lobe_model = fit_lobes(n[sample], obs[sample], w[sample], rho[sample], mix[sample], directions)
         if float(jnp.mean(change)) < tol_deg and not use_normals:
@@ -215,16 +216,17 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 6, tol_de
             break
     if use_normals:
         status = RESULTS.OK
-    rho, mix = _blockwise(lambda nb, o, wb: solve_mix(nb, o, wb, directions, lobe_model), (n, obs, w), n_px, block)
+    table = lobe_table(lobe_model)
+    rho, mix = _blockwise(lambda nb, o, wb: solve_mix(nb, o, wb, directions, table), (n, obs, w), n_px, block)
     fit = _assemble(mask, n, rho, mix, lobe_model, status, done)
     return raise_on_status("fit_capture", fit.status, fit) if throw else fit
 
 
 @jax.jit
-def _fixed_block(n, obs, ok, w, directions, lobes, floor):
+def _fixed_block(n, obs, ok, w, directions, table, floor):
     """One alternation with the normals kept."""
-    rho, mix = solve_mix(n, obs, w, directions, lobes)
-    w2 = _robust_weights(n, obs, ok, rho, mix, directions, lobes, floor)
+    rho, mix = solve_mix(n, obs, w, directions, table)
+    w2 = _robust_weights(n, obs, ok, rho, mix, directions, table, floor)
     return n, rho, mix, w2, jnp.zeros(n.shape[0], n.dtype)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
-from ._normals import local_directions
+from ._normals import local_directions, small_lstsq
 
 #: the shared lobes' polynomial: Rusinkiewicz variables (``theta_h``, ``theta_d``; isotropic, frame-free), degree,
 #: clamped to the fitted box (bounded under unseen lights); measured in ``benchmarks/bench_capture.py``
@@ -43,9 +43,54 @@ def shade(n, rho, mix, directions, lobes: PolynomialBRDF):
     return cos[:, None] * (rho / jnp.pi + jnp.einsum("k,klc->lc", mix, g))
 
 
-def _mix_pixel(n, obs, w, directions, lobes):
+#: nodes per axis of the lobes' table in ``(theta_h, theta_d)`` over ``[0, pi/2]^2`` (the fit's inner loops read
+#: the table, bilinear; the fitted :class:`CaptureFit` evaluates the polynomials themselves)
+TABLE_SIZE = 91
+
+
+def lobe_table(lobes: PolynomialBRDF, size: int = TABLE_SIZE):
+    """``(K, size, size, 3)`` values of the lobes at nodes of ``(theta_h, theta_d)`` (any ``phi_d``: the
+    Rusinkiewicz variables do not depend on it)."""
+    t = jnp.linspace(0.0, jnp.pi / 2, size)
+    th, td = jnp.meshgrid(t, t, indexing="ij")
+    th, td = th.reshape(-1), td.reshape(-1)
+    zero = jnp.zeros_like(th)
+    half_u = jnp.stack([zero, jnp.sin(td), jnp.cos(td)], -1)  # phi_d = 90 degrees, in the half vector's frame
+    half_v = jnp.stack([zero, -jnp.sin(td), jnp.cos(td)], -1)
+
+    def tilt(a):  # the half vector tilted by theta_h about y
+        return jnp.stack([a[:, 0] * jnp.cos(th) + a[:, 2] * jnp.sin(th), a[:, 1],
+                          -a[:, 0] * jnp.sin(th) + a[:, 2] * jnp.cos(th)], -1)
+
+    g = lobe_values(lobes, tilt(half_u), tilt(half_v))  # (K, size^2, 3)
+    return g.reshape(g.shape[0], size, size, 3)
+
+
+def table_shading(n, directions, table):
+    """``(cos (L,), g (K, L, 3))`` of one pixel from the lobes' table (bilinear in ``theta_h, theta_d``)."""
+    view = jnp.array([0.0, 0.0, 1.0], n.dtype)
+    h = directions + view
+    h = h / jnp.linalg.norm(h, axis=-1, keepdims=True)
+    size = table.shape[1]
+    scale = (size - 1) / (jnp.pi / 2)
+    x = jnp.clip(jnp.arccos(jnp.clip(h @ n, -1.0, 1.0 - 1e-12)) * scale, 0.0, size - 1.0 - 1e-9)
+    y = jnp.clip(jnp.arccos(jnp.clip(jnp.sum(directions * h, -1), -1.0, 1.0 - 1e-12)) * scale, 0.0, size - 1 - 1e-9)
+    i, j = jnp.floor(x).astype(int), jnp.floor(y).astype(int)
+    fx, fy = (x - i)[None, :, None], (y - j)[None, :, None]
+    g = (table[:, i, j] * (1 - fx) * (1 - fy) + table[:, i + 1, j] * fx * (1 - fy)
+         + table[:, i, j + 1] * (1 - fx) * fy + table[:, i + 1, j + 1] * fx * fy)
+    return jnp.maximum(directions @ n, 0.0), g
+
+
+def shade_table(n, rho, mix, directions, table):
+    """:func:`shade` from the lobes' table."""
+    cos, g = table_shading(n, directions, table)
+    return cos[:, None] * (rho / jnp.pi + jnp.einsum("k,klc->lc", mix, g))
+
+
+def _mix_pixel(n, obs, w, directions, table):
     """One pixel's ``(rho (3,), mix (K,))`` by the active-set solve of the module notes."""
-    cos, g = pixel_shading(n, directions, lobes)
+    cos, g = table_shading(n, directions, table)
     n_l, k = cos.shape[0], g.shape[0]
     diffuse = cos[:, None, None] / jnp.pi * jnp.eye(3, dtype=obs.dtype)[None]  # (L, 3, 3): rows (l, c), cols rho_c
     design = jnp.concatenate([diffuse, cos[:, None, None] * jnp.moveaxis(g, 0, -1)], -1).reshape(3 * n_l, 3 + k)
@@ -54,15 +99,15 @@ def _mix_pixel(n, obs, w, directions, lobes):
     x = jnp.zeros(3 + k, obs.dtype)
     for _ in range(k + 1):
         a = design * sw[:, None] * keep[None]
-        x = jnp.linalg.lstsq(a, obs.reshape(-1) * sw, rcond=1e-10)[0] * keep
+        x = small_lstsq(a, obs.reshape(-1) * sw) * keep
         keep = keep & (x >= 0)
     x = jnp.maximum(x, 0.0)
     return x[:3], x[3:]
 
 
-def solve_mix(normals, obs, w, directions, lobes: PolynomialBRDF):
-    """``(rho (P, 3), mix (P, K))`` of a block of pixels (module notes), vmapped."""
-    return jax.vmap(lambda n, o, wi: _mix_pixel(n, o, wi, directions, lobes))(normals, obs, w)
+def solve_mix(normals, obs, w, directions, table):
+    """``(rho (P, 3), mix (P, K))`` of a block of pixels (module notes), vmapped; ``table``: :func:`lobe_table`."""
+    return jax.vmap(lambda n, o, wi: _mix_pixel(n, o, wi, directions, table))(normals, obs, w)
 
 
 def _lobe_samples(normals, obs, w, rho, directions):
@@ -95,4 +140,5 @@ def fit_lobes(normals, obs, w, rho, mix, directions, degree: int = LOBE_DEGREE) 
                           cutoff_deg=None, interactions=True, clamp=True)
 
 
-__all__ = ["LOBE_DEGREE", "LOBE_VARIABLES", "fit_lobes", "lobe_values", "pixel_shading", "shade", "solve_mix"]
+__all__ = ["LOBE_DEGREE", "LOBE_VARIABLES", "TABLE_SIZE", "fit_lobes", "lobe_table", "lobe_values", "pixel_shading",
+           "shade", "shade_table", "solve_mix", "table_shading"]

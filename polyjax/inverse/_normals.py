@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import jax.scipy.linalg
 from jaxtyping import Array, Float
 
 #: Cauchy scales of the start's reweighting (in median absolute deviations): positive residuals (highlights) are
@@ -27,10 +28,20 @@ from jaxtyping import Array, Float
 CAUCHY_HIGH, CAUCHY_LOW = 0.5, 3.0
 
 
+def small_lstsq(a: Float[Array, "n k"], b: Float[Array, " n"], ridge: float = 1e-10) -> Float[Array, " k"]:
+    """``min |a x - b|^2 + ridge |a|_F^2 / k |x|^2`` by QR of ``a`` stacked on the ridge's rows (a tiny Tikhonov
+    term that keeps rank-deficient designs, e.g. a dropped column, solvable); batched under ``vmap``."""
+    k = a.shape[1]
+    lam = jnp.sqrt(ridge * jnp.sum(a**2) / k + 1e-300)
+    q, r = jnp.linalg.qr(jnp.concatenate([a, lam * jnp.eye(k, dtype=a.dtype)]))
+    rhs = q.T @ jnp.concatenate([b, jnp.zeros(k, b.dtype)])
+    return jax.scipy.linalg.solve_triangular(r, rhs, lower=False)
+
+
 def _lstsq3(a: Float[Array, "n 3"], b: Float[Array, " n"], w: Float[Array, " n"]) -> Float[Array, "3"]:
-    """Weighted least squares ``min sum w (a x - b)^2`` of 3 unknowns by SVD of the weighted design."""
+    """Weighted least squares ``min sum w (a x - b)^2`` of 3 unknowns (:func:`small_lstsq`)."""
     s = jnp.sqrt(w)
-    return jnp.linalg.lstsq(a * s[:, None], b * s, rcond=1e-10)[0]
+    return small_lstsq(a * s[:, None], b * s)
 
 
 def _lambertian_pixel(g, ok, d, steps: int):
@@ -95,7 +106,7 @@ def _pixel_step(n0, obs, w, shade, damping):
     r0 = residual(zero)
     jac = jax.jacfwd(residual)(zero)
     a = jnp.concatenate([jac, jnp.sqrt(damping) * jnp.eye(2, dtype=obs.dtype)])
-    step = jnp.linalg.lstsq(a, jnp.concatenate([-r0, zero]), rcond=1e-10)[0]
+    step = small_lstsq(a, jnp.concatenate([-r0, zero]), ridge=0.0)
     step = jnp.clip(step, -0.3, 0.3)
     r1 = residual(step)
     better = jnp.sum(r1**2) < jnp.sum(r0**2)
@@ -121,4 +132,4 @@ def gauss_newton_normals(normals, obs, w, shade_fn, params, steps: int = 2, damp
     return jax.vmap(one)(normals, obs, w, params)
 
 
-__all__ = ["gauss_newton_normals", "lambertian_normals", "local_directions", "tangent_frame"]
+__all__ = ["gauss_newton_normals", "lambertian_normals", "local_directions", "small_lstsq", "tangent_frame"]
