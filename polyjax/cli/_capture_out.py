@@ -43,8 +43,8 @@ def run_capture_fit_photos(args, capture, save: Path) -> int:
     fit = pj.fit_capture(capture)
     seconds = time.perf_counter() - t0
     status = pj.RESULTS(int(np.asarray(fit.status))).name
+    files = write_textures_beside(fit, save)  # first: they need no model kind of the fit
     pj.save_model(save, fit, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
-    files = write_textures_beside(fit, save)
     out = {"lights": capture.n_lights, "pixels": int(np.asarray(capture.mask).sum()), "lobes": int(fit.mix.shape[-1]),
            "status": status, "fit_seconds": seconds, "saved": str(save),
            "textures": str(textures_folder(save)), "texture_files": sorted(files)}
