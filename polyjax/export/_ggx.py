@@ -136,7 +136,19 @@ def _grid_fit(u, v, f, roughness):
     return amp, off, res, jnp.sum(rhs * rhs, axis=(1, 2))
 
 
-def fit_ggx_lobes(lobes, *, directions=None, samples: int = 8192, seed: int = 0) -> GGXLobes:
+def _offset_only(u, v, f):
+    """The pooled weighted squared residual ``(K,)`` of each lobe fitted by a diffuse offset alone, and the offset
+    ``(K, 3)`` (the weights of :func:`_grid_fit`)."""
+    c = np.cos(np.radians(80.0))
+    w = np.where((u[:, 2] >= c) & (v[:, 2] >= c), u[:, 2], 0.0)
+    col, rhs = w / np.pi, w[None, :, None] * f
+    off = np.einsum("n,knc->kc", col, rhs) / max(float(np.sum(col * col)), 1e-300)
+    res = np.sum((rhs - off[:, None, :] * col[None, :, None]) ** 2, axis=(1, 2))
+    return res, off
+
+
+def fit_ggx_lobes(lobes, *, directions=None, samples: int = 8192, seed: int = 0,
+                  min_gain: float = 0.1) -> GGXLobes:
     """Fit glTF's GGX lobe and a diffuse offset (module notes) to each of ``K`` lobes.
 
     Args:
@@ -146,6 +158,10 @@ def fit_ggx_lobes(lobes, *, directions=None, samples: int = 8192, seed: int = 0)
             ``samples`` random pairs over the hemisphere.
         samples: the number of random pairs (at least 256).
         seed: their random seed.
+        min_gain: a GGX lobe is kept only where it lowers the L2 of the offset alone by this fraction (default
+            10%); otherwise the lobe is the offset alone (amplitude 0, roughness 1): a GGX lobe that explains
+            almost nothing of a lobe is a guess, and the narrowest guess (a spike between the samples) would
+            make glTF mirrors of diffuse texels.
 
     Returns:
         A :class:`GGXLobes` of the ``K`` fits.
@@ -166,11 +182,15 @@ def fit_ggx_lobes(lobes, *, directions=None, samples: int = 8192, seed: int = 0)
         raise InputError(f"lobes: expected finite values of shape (K, {len(u)}, 3), found {np.shape(f)}")
     res = np.asarray(_grid_fit(u, v, f, jnp.asarray(_COARSE))[2])
     best = _COARSE[np.argmin(res, axis=1)]  # (K,)
+    flat = _offset_only(u, v, f)  # (K,): the residual of the offset alone, and the offset
     out = []
     for k in range(f.shape[0]):  # each lobe on its own fine grid
         fine = np.clip(best[k] + _FINE, 0.01, 1.0)
         amp, off, r, own = (np.asarray(x)[0] for x in _grid_fit(u, v, f[k:k + 1], jnp.asarray(fine)))
         j = int(np.argmin(r))
-        out.append((fine[j], amp[j], off[j], np.sqrt(max(float(r[j]), 0.0) / max(float(own), 1e-300))))
+        rough, amp, off, r = fine[j], amp[j], off[j], max(float(r[j]), 0.0)
+        if r > (1.0 - min_gain) ** 2 * flat[0][k]:  # GGX explains too little: the offset alone
+            rough, amp, off, r = 1.0, np.zeros(3), flat[1][k], flat[0][k]
+        out.append((rough, amp, off, np.sqrt(r / max(float(own), 1e-300))))
     rough, amp, off, rel = (np.stack(x) for x in zip(*out))
     return GGXLobes(jnp.asarray(rough), jnp.asarray(amp), jnp.asarray(off), jnp.asarray(rel))
