@@ -13,17 +13,12 @@ photograph and one between two of them:
 - ``Blender``: Blender's render of the ``.glb`` (8-bit textures, Principled BSDF: Burley's diffuse);
 - ``B-vs-glTF``: Blender's render against ``glTF`` (the renderer's own departure from the specification).
 
-The capture fit: ``--fit capture`` is ``polyjax.fit_capture`` (normals and BRDF from the photographs alone) where
-this polyjax has it; ``--fit reference`` (the default where it does not) is made here, on the ground-truth normals
-(``Normal_gt.mat``), to the same contract: per pixel an RGB diffuse albedo and the weight of one shared lobe (a
-Blinn-Phong microfacet lobe ``(e + 2) / (2 pi) cos^e theta_h / (4 max(cos theta_u, cos theta_v))``, the exponent
-``e`` the best of a grid on the fitted lights), least squares (SVD) per pixel over the fitted lights with
-``n . l > 0.1`` and no saturated channel; where the weight comes out negative, or fewer than 6 lights are
-lit, the weight is 0 and the albedo refitted alone. Fitted on the even-index lights; the held-out
+The capture fit is ``polyjax.fit_capture`` with its defaults (normals and BRDF from the photographs alone, the
+ground-truth normals unused), fitted on the even-index lights; the held-out
 lights are three odd-index ones (the 10th, 50th and 90th percentiles of their elevation). ``bear``: the first 20
 images are left out (DiLiGenT's calibration problem). Images strided to at most 128 pixels a side.
 
-Run: ``python benchmarks/bench_capture_gltf.py [--objects cat,pot1,...] [--fit reference|capture]`` (needs
+Run: ``python benchmarks/bench_capture_gltf.py [--objects cat,pot1,...]`` (needs
 ``blender`` and ``POLYJAX_BLENDER_PYTHONPATH``, as ``tests/test_blender.py``); writes ``benchmarks/capture_card.png``
 (per object: photograph, fit, glTF, Blender under the median held-out light).
 """
@@ -38,7 +33,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -52,27 +46,6 @@ HERE = Path(__file__).resolve().parent
 OBJECTS = ("cat", "pot1", "bear", "pot2", "goblet")
 EXPONENTS = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 MAX_SIDE, SAMPLES = 128, 4
-
-
-def blinn_lobe(u, v, e):
-    """The shared lobe of the reference fit (module notes) at local directions ``(n, 3)``."""
-    h = u + v
-    hz = h[..., 2] / jnp.maximum(jnp.linalg.norm(h, axis=-1), 1e-12)
-    d = (e + 2.0) / (2.0 * jnp.pi) * jnp.maximum(hz, 0.0) ** e
-    return d / (4.0 * jnp.maximum(jnp.maximum(u[..., 2], v[..., 2]), 1e-6))
-
-
-class ReferenceFit(eqx.Module):
-    """A capture fit to the contract of ``polyjax.CaptureFit``, on ground-truth normals (module notes)."""
-
-    normals: jax.Array
-    mask: jax.Array
-    diffuse: jax.Array
-    mix: jax.Array
-    exponent: float = eqx.field(static=True)
-
-    def lobes(self, u, v):
-        return blinn_lobe(jnp.asarray(u), jnp.asarray(v), self.exponent)[None, :, None] * jnp.ones(3)
 
 
 def local(n, w):
@@ -96,45 +69,6 @@ def fit_image(fit, d, e) -> np.ndarray:
     out = np.zeros(m.shape + (3,))
     out[m] = np.asarray(e) * np.maximum(u[:, 2:], 0.0) * f
     return out
-
-
-def _solve(cap, e, idx_ok):
-    """Per pixel least squares of ``(rho_r, rho_g, rho_b, m)`` for lobe exponent ``e``: fit and residual."""
-    m = np.asarray(cap.mask)
-    n = np.asarray(cap.normals)[m]
-    images = np.asarray(cap.images)[:, m]  # (L, P, 3)
-    dirs, ints = np.asarray(cap.light_directions), np.asarray(cap.light_intensities)
-    cos = np.einsum("pc,lc->lp", n, dirs)
-    v = local(n, np.array([0.0, 0.0, 1.0]))
-    lobe = np.stack([np.asarray(blinn_lobe(jnp.asarray(local(n, d)), jnp.asarray(v), e)) for d in dirs])
-    ok = idx_ok & (cos > 0.1) & (images.max(-1) < cap.saturation * 0.99)  # (L, P)
-    b = images / ints[:, None, :]  # (L, P, 3)
-    a = np.zeros(b.shape + (4,))
-    for c in range(3):
-        a[..., c, c] = cos / np.pi
-    a[..., 3] = (cos * lobe)[..., None]
-    w = ok[..., None, None].astype(float)
-    a_p = np.moveaxis(a * w, 1, 0).reshape(len(n), -1, 4)
-    b_p = np.moveaxis(b * w[..., 0], 1, 0).reshape(len(n), -1)
-    x = np.einsum("pij,pj->pi", np.linalg.pinv(a_p), b_p)
-    drop = (ok.sum(0) < 6) | (x[:, 3] < 0)  # too few lit lights, or a negative lobe: the albedo alone
-    x[drop, 3] = 0.0
-    for c in range(3):
-        alone = np.sum(a_p[..., c] * b_p, 1) / np.maximum(np.sum(a_p[..., c] ** 2, 1), 1e-300)
-        x[drop, c] = alone[drop]
-    res = b_p - np.einsum("pij,pj->pi", a_p, x)
-    return x, float(np.sum(res * res))
-
-
-def reference_fit(cap) -> ReferenceFit:
-    """The reference fit of the capture ``cap`` (its lights all fitted)."""
-    ok = np.ones((cap.n_lights, 1), bool)
-    best = min(EXPONENTS, key=lambda e: _solve(cap, e, ok)[1])
-    x, _ = _solve(cap, best, ok)
-    m = np.asarray(cap.mask)
-    diffuse, mix = np.zeros(m.shape + (3,)), np.zeros(m.shape + (1,))
-    diffuse[m], mix[m, 0] = np.maximum(x[:, :3], 0.0), x[:, 3]
-    return ReferenceFit(cap.normals, cap.mask, jnp.asarray(diffuse), jnp.asarray(mix), best)
 
 
 def blender(glb: Path, prefix: Path, shape, lights) -> list[np.ndarray]:
@@ -163,14 +97,14 @@ def _psnr(a, photo, mask):
     return float(pj.psnr(a, photo, peak=float(photo[mask].max()), mask=mask[..., None]))
 
 
-def run_object(name, fit_kind, tmp: Path):
+def run_object(name, tmp: Path):
     """Fit, card, Blender renders and PSNRs of one object; the figure row."""
     cap = pj.data.load_photometric(str(Path(os.environ["POLYJAX_DATA"]) / "diligent" / "crop8" / f"{name}PNG"))
     cap = cap.strided(int(np.ceil(max(np.shape(cap.mask)) / MAX_SIDE)))
     lights = np.arange(20 if name == "bear" else 0, cap.n_lights)
     even, odd = lights[lights % 2 == 0], lights[lights % 2 == 1]
     t0 = time.perf_counter()
-    fit = pj.fit_capture(cap.select(even)) if fit_kind == "capture" else reference_fit(cap.select(even))
+    fit = pj.fit_capture(cap.select(even))
     t_fit = time.perf_counter() - t0
     t0 = time.perf_counter()
     maps = pj.export.card_maps(fit)
@@ -194,8 +128,8 @@ def run_object(name, fit_kind, tmp: Path):
     info = (f"{name}: {mask.shape[1]} x {mask.shape[0]} px, {len(even)} lights fitted, fit {t_fit:.1f} s, card "
             f"{t_card:.1f} s, Blender {t_blender:.1f} s for {len(test)} renders; lobes: GGX roughness "
             f"{np.round(np.asarray(lobes.roughness), 3).tolist()}, relative L2 "
-            f"{np.round(np.asarray(lobes.relative_l2), 3).tolist()}; light scale {maps.scale:.3g}"
-            + (f"; Blinn-Phong exponent {fit.exponent:g}" if fit_kind == "reference" else ""))
+            f"{np.round(np.asarray(lobes.relative_l2), 3).tolist()}; light scale {maps.scale:.3g}; fit status "
+            f"{pj.RESULTS(int(np.asarray(fit.status))).name}, {fit.iterations} alternations")
     return info, rows, fig
 
 
@@ -210,15 +144,14 @@ def _figure(figs, path: Path):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", default=",".join(OBJECTS))
-    ap.add_argument("--fit", choices=("reference", "capture"),
-                    default="capture" if hasattr(pj, "fit_capture") else "reference")
     ap.add_argument("--figure", default=str(HERE / "capture_card.png"))
     args = ap.parse_args()
-    print(f"capture fit: {args.fit}; Blender Cycles, {SAMPLES} samples a pixel, images at most {MAX_SIDE} px a side")
+    print(f"capture fit: polyjax.fit_capture defaults; Blender Cycles, {SAMPLES} samples a pixel, images at most "
+          f"{MAX_SIDE} px a side")
     figs, table = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.objects.split(","):
-            info, rows, fig = run_object(name, args.fit, Path(tmp))
+            info, rows, fig = run_object(name, Path(tmp))
             print(info)
             figs.append(fig)
             table += [(name,) + r for r in rows]
