@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from .._errors import InputError
+from .._io import POLYNOMIAL_KIND, ModelKind, register_model_kind
 from .._model import PolynomialBRDF
 from .._results import RESULTS, raise_on_status
 from ._capture import Capture
@@ -104,9 +105,14 @@ def _pixels(capture):
     return obs, ok, floor
 
 
+#: a block's size is a multiple of this (fewer compiled shapes across captures)
+BLOCK_QUANTUM = 512
+
+
 def _blocks(n: int, block: int):
     """``(start, stop)`` of the blocks of pixels, and the padded size of one."""
-    return [(i, min(i + block, n)) for i in range(0, n, block)], min(block, n)
+    size = min(block, -(-n // BLOCK_QUANTUM) * BLOCK_QUANTUM)
+    return [(i, min(i + size, n)) for i in range(0, n, size)], size
 
 
 def _blockwise(fn, arrays, n: int, block: int):
@@ -275,4 +281,27 @@ def relight(model, capture: Capture, **kwargs) -> Float[Array, "l h w 3"]:
     return relight_model(model, capture, **kwargs)
 
 
-__all__ = ["CaptureFit", "fit_capture", "relight", "relight_fit"]
+_MAPS = ("normals", "mask", "diffuse", "mix", "status")
+
+
+def _to_arrays(fit: CaptureFit):
+    """``(static, arrays)`` of a :class:`CaptureFit` for :func:`polyjax.save_model`: its maps, and its lobes'
+    fields under ``lobe.``."""
+    static, arrays = POLYNOMIAL_KIND.to_arrays(fit.lobe_model)
+    out = {f"lobe.{k}": v for k, v in arrays.items()}
+    out.update({k: np.asarray(getattr(fit, k)) for k in _MAPS})
+    return {"iterations": fit.iterations, "lobe": static}, out
+
+
+def _from_arrays(static, arrays) -> CaptureFit:
+    lobe = POLYNOMIAL_KIND.from_arrays(static["lobe"], {k[5:]: v for k, v in arrays.items() if k.startswith("lobe.")})
+    return CaptureFit(**{k: jnp.asarray(arrays[k]) for k in _MAPS}, lobe_model=lobe,
+                      iterations=int(static["iterations"]))
+
+
+#: saved by :func:`polyjax.save_model` (``.npz``: the maps and the lobes' polynomial), read by
+#: :func:`polyjax.load_model` (kind ``polyjax.CaptureFit``, found through the entry point group ``polyjax.models``)
+CAPTURE_FIT_KIND = register_model_kind(ModelKind(kind="polyjax.CaptureFit", type=CaptureFit, to_arrays=_to_arrays,
+                                                 from_arrays=_from_arrays, status_names=tuple(r.name for r in RESULTS)))
+
+__all__ = ["CAPTURE_FIT_KIND", "CaptureFit", "fit_capture", "relight", "relight_fit"]
