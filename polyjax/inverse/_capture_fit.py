@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._arrays import is_traced
 from .._errors import InputError
 from .._io import POLYNOMIAL_KIND, ModelKind, register_model_kind
 from .._model import PolynomialBRDF
@@ -217,7 +218,7 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 6, tol_de
         n, rho, mix, w, change = _blockwise(partial(block_fn, directions=directions, table=table, floor=floor),
                                             (n, obs, ok, w), n_px, block)
         lobe_model = fit_lobes(n[sample], obs[sample], w[sample], rho[sample], mix[sample], directions)
-        if float(jnp.mean(change)) < tol_deg and not use_normals:
+        if not use_normals and not is_traced(change) and float(jnp.mean(change)) < tol_deg:
             status = RESULTS.OK
             break
     if use_normals:

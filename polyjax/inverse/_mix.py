@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
@@ -134,7 +133,7 @@ def fit_lobes(normals, obs, w, rho, mix, directions, degree: int = LOBE_DEGREE) 
     def to_lanes(a):  # (K, S, L, 3) -> (K, 3, S L)
         return jnp.moveaxis(a.reshape(k, s * n_l, 3), -1, 1)
 
-    mask_l = np.asarray(to_lanes(mask))
+    mask_l = to_lanes(mask)
     return fit_polynomial(u.reshape(-1, 3), v.reshape(-1, 3), to_lanes(jnp.where(mask, values, 0.0)),
                           LOBE_VARIABLES, degree, weights=to_lanes(weights), mask=mask_l,
                           cutoff_deg=None, interactions=True, clamp=True)
