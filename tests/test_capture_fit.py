@@ -16,6 +16,7 @@ import png
 import pytest
 
 import polyjax as pj
+from polyjax.cli import main
 
 jax.config.update("jax_enable_x64", True)
 
@@ -165,6 +166,21 @@ def test_fit_capture_gradient(synthetic):
 
     gl = float(jax.grad(loss)(0.0))
     assert np.isfinite(gl) and gl != 0.0
+
+
+@pytest.mark.slow
+def test_fit_photos_without_normals(tmp_path, synthetic):
+    capture, _, mask = synthetic
+    images8 = np.clip(np.round(np.asarray(capture.images) / 2.0 * 255), 0, 255).astype(np.uint8)
+    folder = tmp_path / "obj"
+    write_folder(str(folder), images8, mask, np.asarray(capture.light_directions),
+                 np.asarray(capture.light_intensities) / 2.0)
+    out = tmp_path / "fit.npz"
+    assert main(["--no-cache", "fit-photos", str(folder), "--lights", "0:32:2", "--lobes", "1", "--save",
+                 str(out)]) == 0
+    fit = pj.load_model(out)
+    assert isinstance(fit, pj.CaptureFit) and fit.n_lobes == 1
+    assert fit.normals.shape[-1] == 3 and fit.residuals.shape[0] == 16
 
 
 @pytest.mark.data
