@@ -1,12 +1,10 @@
 """A capture fit's files out of the command line: the texture folder ``polyjax fit-photos`` writes beside a fit made
-without scanned normals (:func:`write_textures_beside`, :func:`run_capture_fit_photos`), and the ``.glb`` card of
+without scanned normals (:func:`write_textures_beside`), and the ``.glb`` card of
 ``polyjax export FIT --to gltf`` when ``FIT`` is a saved capture fit (:func:`capture_fit_of`,
 :func:`run_card_export`)."""
 
 from __future__ import annotations
 
-import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,27 +32,6 @@ def write_textures_beside(fit, save: Path, *, bits: int = 16) -> dict[str, Path]
     folder = textures_folder(Path(save))
     folder.mkdir(exist_ok=True)
     return export.write_capture_textures(fit, folder, bits=bits)
-
-
-def run_capture_fit_photos(args, capture, save: Path) -> int:
-    """``polyjax fit-photos`` on a capture without normals: :func:`polyjax.fit_capture`, the fit saved to ``save``
-    and its textures beside it; returns the exit status (0 when the fit's status is ``OK``)."""
-    t0 = time.perf_counter()
-    fit = pj.fit_capture(capture)
-    seconds = time.perf_counter() - t0
-    status = pj.RESULTS(int(np.asarray(fit.status))).name
-    files = write_textures_beside(fit, save)  # first: they need no model kind of the fit
-    pj.save_model(save, fit, metadata={"fit_seconds": seconds, "fit_command": "fit-photos"})
-    out = {"lights": capture.n_lights, "pixels": int(np.asarray(capture.mask).sum()), "lobes": int(fit.mix.shape[-1]),
-           "status": status, "fit_seconds": seconds, "saved": str(save),
-           "textures": str(textures_folder(save)), "texture_files": sorted(files)}
-    if getattr(args, "json", False):
-        print(json.dumps(out))
-    else:
-        print(f"fit-photos: normals and {out['lobes']} shared lobes fitted to {out['lights']} lights, "
-              f"{out['pixels']} pixels ({seconds:.2f} s); status {status}; fit written to {save}")
-        print(f"  textures (normal map, material maps) in {out['textures']}: {', '.join(sorted(files))}")
-    return 0 if status == "OK" else 1
 
 
 def capture_fit_of(source: str):

@@ -33,7 +33,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._arrays import is_traced
 from .._errors import InputError
+from .._io import POLYNOMIAL_KIND, ModelKind, register_model_kind
 from .._model import PolynomialBRDF
 from .._results import RESULTS, raise_on_status
 from ._capture import Capture
@@ -58,6 +60,9 @@ class CaptureFit(eqx.Module):
         lobe_model: the lobes, a :class:`polyjax.PolynomialBRDF` of batch ``(K, 3)`` (lobe, channel).
         status: a ``RESULTS`` code (``OK``: converged; ``MAX_STEPS``: iterations ran out first).
         iterations: the alternations run.
+        residuals: ``(Lf, H, W, 3)`` what the model leaves of each fitted photograph, over irradiance
+            (``I / E - max(0, n . d) f``; 0 for saturated samples and off the mask), or None.
+        fit_directions: ``(Lf, 3)`` the fitted lights' directions (with ``residuals``), or None.
     """
 
     normals: Float[Array, "h w 3"]
@@ -67,6 +72,8 @@ class CaptureFit(eqx.Module):
     lobe_model: PolynomialBRDF
     status: Int[Array, ""]
     iterations: int = eqx.field(static=True, default=0)
+    residuals: Float[Array, "lf h w 3"] | None = None
+    fit_directions: Float[Array, "lf 3"] | None = None
 
     @property
     def n_lobes(self) -> int:
@@ -104,9 +111,14 @@ def _pixels(capture):
     return obs, ok, floor
 
 
+#: a block's size is a multiple of this (fewer compiled shapes across captures)
+BLOCK_QUANTUM = 512
+
+
 def _blocks(n: int, block: int):
     """``(start, stop)`` of the blocks of pixels, and the padded size of one."""
-    return [(i, min(i + block, n)) for i in range(0, n, block)], min(block, n)
+    size = min(block, -(-n // BLOCK_QUANTUM) * BLOCK_QUANTUM)
+    return [(i, min(i + size, n)) for i in range(0, n, size)], size
 
 
 def _blockwise(fn, arrays, n: int, block: int):
@@ -211,7 +223,7 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 6, tol_de
         n, rho, mix, w, change = _blockwise(partial(block_fn, directions=directions, table=table, floor=floor),
                                             (n, obs, ok, w), n_px, block)
         lobe_model = fit_lobes(n[sample], obs[sample], w[sample], rho[sample], mix[sample], directions)
-        if float(jnp.mean(change)) < tol_deg and not use_normals:
+        if not use_normals and not is_traced(change) and float(jnp.mean(change)) < tol_deg:
             status = RESULTS.OK
             break
     if use_normals:
@@ -219,6 +231,14 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 6, tol_de
     table = lobe_table(lobe_model)
     rho, mix = _blockwise(lambda nb, o, wb: solve_mix(nb, o, wb, directions, table), (n, obs, w), n_px, block)
     fit = _assemble(mask, n, rho, mix, lobe_model, status, done)
+    pred = _blockwise(lambda a, b, c: _relight_block(a, b, c, directions, lobe_model), (n, rho, mix), n_px, block)
+    unsat = jnp.moveaxis(jnp.all(jnp.asarray(capture.images)[:, mask] < capture.saturation, -1), 0, 1)
+    res = jnp.where(unsat[..., None], obs - pred, 0.0)
+    h, w_ = mask.shape
+    res_img = jnp.zeros((h * w_,) + res.shape[1:], res.dtype).at[jnp.asarray(np.flatnonzero(mask))].set(res)
+    fit = eqx.tree_at(lambda f: (f.residuals, f.fit_directions), fit,
+                      (jnp.moveaxis(res_img.reshape(h, w_, -1, 3), 2, 0), directions),
+                      is_leaf=lambda x: x is None)
     return raise_on_status("fit_capture", fit.status, fit) if throw else fit
 
 
@@ -249,9 +269,28 @@ def _relight_block(n, rho, mix, directions, lobes):
     return jax.vmap(lambda ni, r, m: shade(ni, r, m, directions, lobes))(n, rho, mix)
 
 
-def relight_fit(fit: CaptureFit, capture: Capture, *, block: int = 4096) -> Float[Array, "l h w 3"]:
+#: the fitted lights whose residuals a relit image interpolates (inverse-angle weights); measured on the DiLiGenT
+#: objects (``benchmarks/bench_capture.py``)
+RESIDUAL_NEIGHBOURS = 3
+
+
+def residual_interpolation(fit: CaptureFit, directions, k: int = RESIDUAL_NEIGHBOURS) -> Float[Array, "l h w 3"]:
+    """``(L, H, W, 3)`` the fit's residuals (over irradiance) interpolated to the lights ``directions``: the ``k``
+    fitted lights nearest in angle, weights ``1 / angle`` normalised (a fitted light returns its own residual)."""
+    ang = jnp.arccos(jnp.clip(directions @ fit.fit_directions.T, -1.0, 1.0))
+    ang_k, near = jax.lax.top_k(-ang, min(k, ang.shape[1]))
+    wts = 1.0 / jnp.maximum(-ang_k, 1e-9)
+    wts = wts / jnp.sum(wts, axis=1, keepdims=True)
+    return jnp.einsum("tj,tjhwc->thwc", wts, fit.residuals[near])
+
+
+def relight_fit(fit: CaptureFit, capture: Capture, *, block: int = 4096,
+                residuals: bool = True) -> Float[Array, "l h w 3"]:
     """The images ``(L, H, W, 3)`` a :class:`CaptureFit` predicts under ``capture``'s lights (same camera, same
-    image size): ``E_l max(0, n . d_l) f_p(u, v)`` on the fit's mask, 0 elsewhere; differentiable."""
+    image size): ``E_l (max(0, n . d_l) f_p(u, v) + r_l)`` on the fit's mask, 0 elsewhere, ``r_l`` the fit's
+    residuals interpolated from the nearest fitted lights (:func:`residual_interpolation`: cast shadows and
+    inter-reflection the BRDF does not model; ``residuals=False`` or a fit without them: the model alone);
+    differentiable."""
     if tuple(np.shape(capture.mask)) != tuple(np.shape(fit.mask)):
         raise InputError(f"capture: expected images of the fit's size {tuple(np.shape(fit.mask))}, found "
                          f"{tuple(np.shape(capture.mask))}")
@@ -263,7 +302,10 @@ def relight_fit(fit: CaptureFit, capture: Capture, *, block: int = 4096) -> Floa
     e = jnp.asarray(capture.light_intensities)
     h, w = mask.shape
     out = jnp.zeros((h * w, directions.shape[0], 3), pred.dtype).at[jnp.asarray(np.flatnonzero(mask))].set(pred)
-    return jnp.moveaxis(out.reshape(h, w, -1, 3), 2, 0) * e[:, None, None, :]
+    out = jnp.moveaxis(out.reshape(h, w, -1, 3), 2, 0)
+    if residuals and fit.residuals is not None:
+        out = out + residual_interpolation(fit, directions) * jnp.asarray(mask)[None, ..., None]
+    return out * e[:, None, None, :]
 
 
 def relight(model, capture: Capture, **kwargs) -> Float[Array, "l h w 3"]:
@@ -275,4 +317,30 @@ def relight(model, capture: Capture, **kwargs) -> Float[Array, "l h w 3"]:
     return relight_model(model, capture, **kwargs)
 
 
-__all__ = ["CaptureFit", "fit_capture", "relight", "relight_fit"]
+_MAPS = ("normals", "mask", "diffuse", "mix", "status")
+
+
+def _to_arrays(fit: CaptureFit):
+    """``(static, arrays)`` of a :class:`CaptureFit` for :func:`polyjax.save_model`: its maps, and its lobes'
+    fields under ``lobe.``."""
+    static, arrays = POLYNOMIAL_KIND.to_arrays(fit.lobe_model)
+    out = {f"lobe.{k}": v for k, v in arrays.items()}
+    out.update({k: np.asarray(getattr(fit, k)) for k in _MAPS})
+    if fit.residuals is not None:
+        out.update(residuals=np.asarray(fit.residuals), fit_directions=np.asarray(fit.fit_directions))
+    return {"iterations": fit.iterations, "lobe": static}, out
+
+
+def _from_arrays(static, arrays) -> CaptureFit:
+    lobe = POLYNOMIAL_KIND.from_arrays(static["lobe"], {k[5:]: v for k, v in arrays.items() if k.startswith("lobe.")})
+    extra = {k: jnp.asarray(arrays[k]) for k in ("residuals", "fit_directions") if k in arrays}
+    return CaptureFit(**{k: jnp.asarray(arrays[k]) for k in _MAPS}, lobe_model=lobe,
+                      iterations=int(static["iterations"]), **extra)
+
+
+#: saved by :func:`polyjax.save_model` (``.npz``: the maps and the lobes' polynomial), read by
+#: :func:`polyjax.load_model` (kind ``polyjax.CaptureFit``, found through the entry point group ``polyjax.models``)
+CAPTURE_FIT_KIND = register_model_kind(ModelKind(kind="polyjax.CaptureFit", type=CaptureFit, to_arrays=_to_arrays,
+                                                 from_arrays=_from_arrays, status_names=tuple(r.name for r in RESULTS)))
+
+__all__ = ["CAPTURE_FIT_KIND", "CaptureFit", "fit_capture", "relight", "relight_fit"]

@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._fit.polynomial import fit_polynomial
 from .._model import PolynomialBRDF
-from ._normals import local_directions, small_lstsq
+from ._normals import local_directions, safe_sqrt, small_lstsq
 
 #: the shared lobes' polynomial: Rusinkiewicz variables (``theta_h``, ``theta_d``; isotropic, frame-free), degree,
 #: clamped to the fitted box (bounded under unseen lights); measured in ``benchmarks/bench_capture.py``
@@ -94,7 +93,7 @@ def _mix_pixel(n, obs, w, directions, table):
     n_l, k = cos.shape[0], g.shape[0]
     diffuse = cos[:, None, None] / jnp.pi * jnp.eye(3, dtype=obs.dtype)[None]  # (L, 3, 3): rows (l, c), cols rho_c
     design = jnp.concatenate([diffuse, cos[:, None, None] * jnp.moveaxis(g, 0, -1)], -1).reshape(3 * n_l, 3 + k)
-    sw = jnp.sqrt(w.reshape(-1))
+    sw = safe_sqrt(w.reshape(-1))
     keep = jnp.ones(3 + k, bool)
     x = jnp.zeros(3 + k, obs.dtype)
     for _ in range(k + 1):
@@ -134,7 +133,7 @@ def fit_lobes(normals, obs, w, rho, mix, directions, degree: int = LOBE_DEGREE) 
     def to_lanes(a):  # (K, S, L, 3) -> (K, 3, S L)
         return jnp.moveaxis(a.reshape(k, s * n_l, 3), -1, 1)
 
-    mask_l = np.asarray(to_lanes(mask))
+    mask_l = to_lanes(mask)
     return fit_polynomial(u.reshape(-1, 3), v.reshape(-1, 3), to_lanes(jnp.where(mask, values, 0.0)),
                           LOBE_VARIABLES, degree, weights=to_lanes(weights), mask=mask_l,
                           cutoff_deg=None, interactions=True, clamp=True)

@@ -38,9 +38,15 @@ def small_lstsq(a: Float[Array, "n k"], b: Float[Array, " n"], ridge: float = 1e
     return jax.scipy.linalg.solve_triangular(r, rhs, lower=False)
 
 
+def safe_sqrt(w):
+    """``sqrt(w)`` of non-negative weights whose derivative is finite at ``w = 0`` (0 there)."""
+    pos = w > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, w, 1.0)), 0.0)
+
+
 def _lstsq3(a: Float[Array, "n 3"], b: Float[Array, " n"], w: Float[Array, " n"]) -> Float[Array, "3"]:
     """Weighted least squares ``min sum w (a x - b)^2`` of 3 unknowns (:func:`small_lstsq`)."""
-    s = jnp.sqrt(w)
+    s = safe_sqrt(w)
     return small_lstsq(a * s[:, None], b * s)
 
 
@@ -97,7 +103,7 @@ def _pixel_step(n0, obs, w, shade, damping):
         n = n0 + ab[0] * t1 + ab[1] * t2
         return n / jnp.linalg.norm(n)
 
-    sw = jnp.sqrt(w)
+    sw = safe_sqrt(w)
 
     def residual(ab):
         return ((obs - shade(normal(ab))) * sw).reshape(-1)
@@ -132,4 +138,5 @@ def gauss_newton_normals(normals, obs, w, shade_fn, params, steps: int = 2, damp
     return jax.vmap(one)(normals, obs, w, params)
 
 
-__all__ = ["gauss_newton_normals", "lambertian_normals", "local_directions", "small_lstsq", "tangent_frame"]
+__all__ = ["gauss_newton_normals", "lambertian_normals", "local_directions", "safe_sqrt", "small_lstsq",
+           "tangent_frame"]
