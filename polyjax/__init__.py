@@ -52,8 +52,8 @@ __version__ = "0.1.0"
 # imported on first use: they pull in far more than a fit needs
 _LAZY_SUBMODULES = ("cli", "export", "inverse", "render", "svbrdf", "view")
 #: names of the lazily imported ``inverse`` package offered here too (the fits from images, a capture)
-_LAZY_NAMES = {"Capture": "inverse", "ImageRows": "inverse", "fit_polynomial_to_images": "inverse",
-               "image_rows": "inverse", "relight": "inverse"}
+_LAZY_NAMES = {"Capture": "inverse", "CaptureFit": "inverse", "ImageRows": "inverse", "fit_capture": "inverse",
+               "fit_polynomial_to_images": "inverse", "image_rows": "inverse", "relight": "inverse"}
 
 
 def __getattr__(name):
@@ -74,10 +74,12 @@ def __dir__():
 
 
 __all__ = [
-    "approximation_error", "ApproximationError", "CACHE_ENV", "Capture", "cartesian_to_spherical", "check_samples",
+    "approximation_error", "ApproximationError", "CACHE_ENV", "Capture", "CaptureFit",
+    "cartesian_to_spherical", "check_samples",
     "cos_theta", "cutoff_mask", "data", "DATA_ENV", "data_root", "DataFormatError", "DataNotFoundError",
     "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form", "explanatory_variables",
-    "exponents", "export", "fit_log_polynomial", "fit_pca", "fit_polynomial", "fit_polynomial_to_images", "FitError",
+    "exponents", "export", "fit_capture", "fit_log_polynomial", "fit_pca", "fit_polynomial",
+    "fit_polynomial_to_images", "FitError",
     "fitted_design", "get_variables", "half_vector", "has_data_root", "image_rows", "ImageRows", "InputError",
     "inverse", "l2_error", "lapack_threads", "log_error", "load_model", "LstsqSolution", "make_measurements",
     "Measurements", "model_metadata", "n_parameters", "n_terms", "PCA", "PolyjaxError", "PolynomialBRDF",

@@ -8,6 +8,10 @@ model is tabulated first at ``--samples`` random direction pairs (uniform in sol
 of the views near the mirror direction so that glossy lobes are sampled), a data set (``merl-nbrdf:<name>``,
 ``merl:<file>``, ``cornell:<name>``, ...) is used as loaded (``--subsample``).
 
+A saved capture fit (:class:`polyjax.CaptureFit`) exported ``--to gltf`` is written as a ``.glb`` card instead
+(:mod:`polyjax.cli._capture_out`, :func:`polyjax.export.gltf_card`): the image plane as a quad with the fit's
+glTF maps as textures.
+
 Printed: the L2 of equation (11) per channel, relative to the data's own L2, and the same weighted L2 of
 ``log(1 + f cos theta_u)`` (a log-space error that weighs dark and bright parts alike).
 """
@@ -25,6 +29,7 @@ from .. import export
 from .._files import check_output_path
 from .._io import fitter_for
 from ..export._mitsuba_choice import PLUGINS, TOLERANCE, fit_plugin
+from ._capture_out import capture_fit_of, run_card_export
 
 #: target -> (standard model fitted, writer in :mod:`polyjax.export`, default suffix)
 TARGETS: dict[str, tuple[str, str, str]] = {
@@ -46,6 +51,8 @@ def add_standard_arguments(p) -> None:
                    f"{', '.join(PLUGINS)} whose L2 is within --tolerance of principled's")
     p.add_argument("--tolerance", type=float, default=TOLERANCE,
                    help=f"--plugin auto: how much larger than principled's L2 a simpler plugin's may be ({TOLERANCE})")
+    p.add_argument("--full-image", action="store_true",
+                   help="--to gltf of a capture fit: the card's quad covers the whole image (default: the mask's box)")
 
 
 def _tabulated(model, n: int, seed: int = 0):
@@ -109,6 +116,9 @@ def run_standard_export(args) -> int:
     jax.config.update("jax_enable_x64", True)
     name, writer, suffix = TARGETS[args.to]
     out = check_output_path(Path(args.out) if args.out else Path(Path(str(args.model)).stem + suffix), "--out")
+    capture_fit = capture_fit_of(str(args.model)) if args.to == "gltf" else None
+    if capture_fit is not None:  # a capture fit: the .glb card of its maps
+        return run_card_export(args, capture_fit, out)
     kind, model_name = fitter_for(name)
     data = _source(args)
     if args.to == "mitsuba-xml":  # the simplest Mitsuba plugin that fits as well as principled

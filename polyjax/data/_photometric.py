@@ -6,10 +6,13 @@ CVPR 2016 / TPAMI 2019) stores each object in a folder ``pmsData/<object>PNG/``:
 - ``filenames.txt``: one image name a line; line ``i`` belongs to row ``i`` of the two light files;
 - ``light_directions.txt``: ``L`` rows ``x y z``, unit directions towards each light in the camera frame;
 - ``light_intensities.txt``: ``L`` rows ``r g b``, each light's intensity per channel;
-- the images: 16-bit RGB PNGs, linear; the camera's units are ``value / 65535`` (65535 is saturation);
+- the images: 16-bit RGB PNGs, linear; the camera's units are ``value / 65535`` (65535 is saturation); 8-bit
+  linear PNGs (every image of one depth) are read as ``value / 255``, their quantisation step ``1 / 255`` recorded
+  on the capture (:attr:`polyjax.Capture.quantisation`);
 - ``mask.png``: object pixels non-zero;
-- normals: ``Normal_gt.mat`` (MATLAB v5, variable ``Normal_gt``, ``(H, W, 3)``) or ``normal.txt`` (``H W`` rows of
-  ``x y z``, row-major), unit vectors in the camera frame;
+- normals (optional: without them the capture's ``normals`` is None; mask pixels whose normal is the zero
+  vector, unknown, leave the mask): ``Normal_gt.mat`` (MATLAB v5, variable ``Normal_gt``, ``(H, W, 3)``) or
+  ``normal.txt`` (``H W`` rows of ``x y z``, row-major), unit vectors in the camera frame;
 - the camera is orthographic and looks along ``-z`` of that frame: the view direction is ``(0, 0, 1)`` everywhere.
 
 16-bit PNGs are read by pypng (Pillow would truncate them to 8 bits), the ``.mat`` file by :func:`read_mat_array`
@@ -41,6 +44,8 @@ from ..inverse._capture import Capture
 
 #: the camera's white level: a 16-bit PNG value is divided by it (and 1.0 is a saturated pixel)
 PNG16_MAX = 65535.0
+#: the same for 8-bit PNGs (linear values, e.g. DiLiGenT's cropped 8-bit copies)
+PNG8_MAX = 255.0
 
 
 _PNG_ERRORS = (png.Error, ValueError, OSError, EOFError, zlib.error, IndexError, TypeError, AssertionError)
@@ -282,8 +287,8 @@ def _lights(folder: str, lights):
     return tuple(names[i] for i in idx), dirs[idx] / np.linalg.norm(dirs[idx], axis=1, keepdims=True), ints[idx]
 
 
-def _normals(folder: str, shape, mask) -> np.ndarray:
-    """``(H, W, 3)`` unit normals from ``Normal_gt.mat`` or ``normal.txt``, checked on the mask."""
+def _normals(folder: str, shape, mask) -> np.ndarray | None:
+    """``(H, W, 3)`` unit normals from ``Normal_gt.mat`` or ``normal.txt``, checked on the mask (None: neither)."""
     mat, txt = os.path.join(folder, "Normal_gt.mat"), os.path.join(folder, "normal.txt")
     if os.path.isfile(mat):
         path, n = mat, read_mat_array(mat, "Normal_gt")
@@ -293,11 +298,11 @@ def _normals(folder: str, shape, mask) -> np.ndarray:
             raise DataFormatError(txt, f"{shape[0] * shape[1]} rows (H x W = {shape})", f"{n.shape[0]}")
         n = n.reshape(shape[0], shape[1], 3)
     else:
-        raise DataNotFoundError(f"{mat}: file not found (nor normal.txt): the capture's normals")
+        return None
     if n.shape != (shape[0], shape[1], 3):
         raise DataFormatError(path, f"normals of shape {(shape[0], shape[1], 3)}", f"{n.shape}")
     length = np.linalg.norm(n, axis=-1)
-    bad = mask & ~(np.abs(length - 1.0) <= 1e-3)
+    bad = mask & ~(np.abs(length - 1.0) <= 1e-3) & (length > 0)  # zero: no normal known there
     if np.any(bad):
         i, j = np.argwhere(bad)[0]
         raise DataFormatError(path, "unit normals on the mask", f"{int(bad.sum())} that are not (pixel ({i}, {j}) "
@@ -313,13 +318,15 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
         lights: 0-based indices of the lines of ``filenames.txt`` to load (None: every light).
 
     Returns:
-        :class:`polyjax.Capture`: ``images (L, H, W, 3)`` in the camera's units (PNG value / 65535), ``mask``,
-        ``normals``, ``light_directions``, ``light_intensities``, ``names`` and its ``scenes``.
+        :class:`polyjax.Capture`: ``images (L, H, W, 3)`` in the camera's units (PNG value / 65535, or / 255 for
+        8-bit images), ``mask``, ``normals`` (None without a normal file), ``quantisation`` (``1 / 65535`` or
+        ``1 / 255``), ``light_directions``, ``light_intensities``, ``names`` and its ``scenes``.
 
     Raises:
-        DataNotFoundError: the folder, a light file, the mask, the normals or an image is missing.
-        DataFormatError: light files of other lengths than ``filenames.txt``, an image that is not 16-bit RGB of
-            the mask's size, normals not of unit length on the mask, a malformed file (each naming the file).
+        DataNotFoundError: the folder, a light file, the mask or an image is missing.
+        DataFormatError: light files of other lengths than ``filenames.txt``, an image that is not RGB of the
+            mask's size and of the first image's depth (16 or 8 bits), normals not of unit length on the mask, a
+            malformed file (each naming the file).
         InputError: light indices out of range.
     """
     folder = os.fspath(folder)
@@ -332,13 +339,33 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
     mask = read_png(mask_path, bits=None)
     mask = (mask.max(axis=-1) if mask.ndim == 3 else mask) > 0
     normals = _normals(folder, mask.shape, mask)
+    if normals is not None:  # mask pixels whose normal is a zero vector (unknown) leave the mask
+        mask = mask & (np.linalg.norm(normals, axis=-1) > 0.5)
+        normals = np.where(mask[..., None], normals, np.array([0.0, 0.0, 1.0]))
+    bits = _bit_depth(os.path.join(folder, names[0]))
     for name in names:  # every header before any image is decoded
-        check_png_header(os.path.join(folder, name), 16, mask.shape, 3)
+        check_png_header(os.path.join(folder, name), bits, mask.shape, 3)
+    white = PNG16_MAX if bits == 16 else PNG8_MAX
     images = np.empty((len(names),) + mask.shape + (3,), np.float64)
     for i, name in enumerate(names):
-        images[i] = read_png(os.path.join(folder, name), bits=16) / PNG16_MAX
+        images[i] = read_png(os.path.join(folder, name), bits=bits) / white
     return Capture(images=images, mask=mask, normals=normals, light_directions=dirs, light_intensities=ints,
-                   names=names)
+                   names=names, quantisation=1.0 / white)
 
 
-__all__ = ["PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png"]
+def _bit_depth(path: str) -> int:
+    """The bit depth of the first image (16 or 8; every image must share it). Raises
+    :class:`polyjax.DataFormatError` naming the file for another depth."""
+    try:
+        with open(path, "rb") as fh:
+            r = png.Reader(file=fh)
+            r.preamble()
+            bits = int(r.bitdepth)
+    except (png.Error, ValueError, OSError, EOFError) as e:
+        raise DataFormatError(path, "a readable PNG file", f"{e}") from None
+    if bits not in (8, 16):
+        raise DataFormatError(path, "a 16-bit or 8-bit PNG (linear camera values)", f"{bits} bits per channel")
+    return bits
+
+
+__all__ = ["PNG8_MAX", "PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png"]

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from .._config import check_output_file
 from .._errors import InputError
-from .._files import write_atomically  # noqa: F401 - the one writer (polyjax._files), also named here
 
 #: a value's kind: "unit" (a float in [0, 1]), "nonnegative" (>= 0), "ior" (>= 1), "positive" (> 0), "real" (any
 #: finite float), "rgb" (three floats in [0, 1]), "rgb+" (three floats >= 0)

@@ -32,26 +32,32 @@ class Capture(eqx.Module):
     Attributes:
         images: ``(L, H, W, 3)`` linear camera values (a 16-bit PNG's value / 65535: 1.0 is saturation).
         mask: ``(H, W)`` True on the object.
-        normals: ``(H, W, 3)`` unit normals in the camera frame (view ``(0, 0, 1)``).
+        normals: ``(H, W, 3)`` unit normals in the camera frame (view ``(0, 0, 1)``), or None when the capture
+            has none (then :func:`polyjax.fit_capture` estimates them; :attr:`scenes` needs them).
         light_directions: ``(L, 3)`` unit directions towards the lights, camera frame.
         light_intensities: ``(L, 3)`` RGB intensity of each light (the irradiance of its scene).
         names: the ``L`` image names.
         saturation: the camera value at which a pixel is clipped (1.0 for 16-bit PNGs).
+        quantisation: the step between two camera values (``1 / 65535`` for 16-bit PNGs, ``1 / 255`` for 8-bit
+            ones; 0 when unknown): the noise floor of the images.
     """
 
     images: Float[Array, "l h w 3"]
     mask: Bool[Array, "h w"]
-    normals: Float[Array, "h w 3"]
+    normals: Float[Array, "h w 3"] | None
     light_directions: Float[Array, "l 3"]
     light_intensities: Float[Array, "l 3"]
     names: tuple = eqx.field(static=True)
     saturation: float = eqx.field(static=True, default=1.0)
+    quantisation: float = eqx.field(static=True, default=0.0)
 
     def __check_init__(self):
         n_l = len(self.names)
         shapes = {"images": (n_l,) + tuple(np.shape(self.mask)) + (3,), "normals": tuple(np.shape(self.mask)) + (3,),
                   "light_directions": (n_l, 3), "light_intensities": (n_l, 3)}
         for field, shape in shapes.items():
+            if getattr(self, field) is None and field == "normals":
+                continue
             if tuple(np.shape(getattr(self, field))) != shape:
                 raise InputError(f"{field}: expected shape {shape} ({n_l} lights, mask {np.shape(self.mask)}), "
                                  f"found {tuple(np.shape(getattr(self, field)))}")
@@ -64,6 +70,9 @@ class Capture(eqx.Module):
     def scenes(self) -> tuple:
         """One :class:`polyjax.render.Scene` per light (module notes): the normal map (a placeholder BRDF) seen by
         an orthographic camera along ``-z``, lit by that light alone."""
+        if self.normals is None:
+            raise InputError("capture.normals: expected normals to make the capture's scenes, found None (fit them "
+                             "with polyjax.fit_capture, then relight that fit)")
         h, w = np.shape(self.mask)
         camera = Camera(eye=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), width=w, height=h,
                         ortho_height=2.0)
@@ -77,7 +86,8 @@ class Capture(eqx.Module):
         if idx.size == 0 or np.any((idx < 0) | (idx >= self.n_lights)):
             raise InputError(f"lights: expected indices in [0, {self.n_lights}), found {np.asarray(lights).tolist()}")
         return Capture(self.images[idx], self.mask, self.normals, self.light_directions[idx],
-                       self.light_intensities[idx], tuple(self.names[i] for i in idx), self.saturation)
+                       self.light_intensities[idx], tuple(self.names[i] for i in idx), self.saturation,
+                       self.quantisation)
 
     def cropped(self, margin: int = 2) -> "Capture":
         """The capture cropped to the mask's bounding box plus ``margin`` pixels (the same fits, fewer pixels to
@@ -89,16 +99,18 @@ class Capture(eqx.Module):
         h, w = mask.shape
         r = slice(max(ys.min() - margin, 0), min(ys.max() + margin + 1, h))
         c = slice(max(xs.min() - margin, 0), min(xs.max() + margin + 1, w))
-        return Capture(self.images[:, r, c], self.mask[r, c], self.normals[r, c], self.light_directions,
-                       self.light_intensities, self.names, self.saturation)
+        normals = None if self.normals is None else self.normals[r, c]
+        return Capture(self.images[:, r, c], self.mask[r, c], normals, self.light_directions,
+                       self.light_intensities, self.names, self.saturation, self.quantisation)
 
     def strided(self, step: int) -> "Capture":
         """Every ``step``-th pixel in each direction (a smaller capture of the same object, for fast fits)."""
         if int(step) != step or int(step) < 1:
             raise InputError(f"step: expected a positive integer, found {step!r}")
         s = int(step)
-        return Capture(self.images[:, ::s, ::s], self.mask[::s, ::s], self.normals[::s, ::s], self.light_directions,
-                       self.light_intensities, self.names, self.saturation)
+        normals = None if self.normals is None else self.normals[::s, ::s]
+        return Capture(self.images[:, ::s, ::s], self.mask[::s, ::s], normals, self.light_directions,
+                       self.light_intensities, self.names, self.saturation, self.quantisation)
 
 
 def relight(model, capture: Capture, *, dtype=None) -> Float[Array, "l h w 3"]:
