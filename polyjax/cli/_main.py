@@ -15,7 +15,7 @@ import jax
 
 from .._cache.compilation import cache_disabled_by_env, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
-from ._args import add_global_options
+from ._args import Parser, add_global_options
 from ._cache import cache_cap_bytes, trim_cache
 
 #: every command and the module of this folder that defines it (in the order of ``polyjax --help``)
@@ -46,10 +46,10 @@ def _command_of(argv: list[str]) -> str | None:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of ``command`` alone (only its module is imported: a shorter start for ``polyjax fit``), or of every
     command when ``command`` is None or not one of :data:`COMMANDS`."""
-    p = argparse.ArgumentParser(prog="polyjax",
+    p = Parser(prog="polyjax",
                                 description="Fit polynomial (and baseline) BRDF models to measured data.")
     add_global_options(p)
-    common = add_global_options(argparse.ArgumentParser(add_help=False), argparse.SUPPRESS)
+    common = add_global_options(Parser(add_help=False), argparse.SUPPRESS)
     sub = p.add_subparsers(dest="command")
     modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
     for name in modules:
