@@ -86,3 +86,39 @@ def test_data_root_help_lists_every_folder_read(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for folder in ("curet/", "cornell/", "nbrdf_sztrajman2021/", "rgl_epfl/", "published_fits/"):
         assert folder in text, folder
+
+
+# ---------------------------------------------------------------- 4: every exporter takes what the others take
+@pytest.mark.parametrize("name, writer, suffix", [
+    ("openpbr", "materialx", ".mtlx"), ("usd-preview", "usd", ".usda")])
+def test_materialx_and_usd_take_a_fit_as_gltf_does(tmp_path, name, writer, suffix):
+    pytest.importorskip("MaterialX" if writer == "materialx" else "pxr")
+    from _standard_problems import grey_fit
+
+    fit = grey_fit(name)[-1]
+    write = getattr(pj.export, writer)
+    a, b = write(fit, tmp_path / f"fit{suffix}"), write(fit.material(), tmp_path / f"dict{suffix}")
+    assert a.read_text() == b.read_text() and len(a.read_text()) > 200
+    with pytest.raises(pj.InputError, match=f"{writer}: expected a material dict .* or a fit with a material"):
+        write("openpbr", tmp_path / f"bad{suffix}")
+
+
+# ---------------------------------------------------------------- 7: a lane ending MAX_STEPS is a warning
+def test_max_steps_lane_is_in_the_python_result_warnings():
+    u, v = random_hemisphere(205, seed=3)
+    b = 0.1 + u[:, 2] * v[:, 2] + 0.2 * u[:, 0] * v[:, 0]
+    fit = bl.fit("cook-torrance", u, v, np.stack([b, 0.5 * b + 0.05]), n_starts=2, max_steps=3)
+    assert [int(s) for s in fit.status] == [pj.RESULTS.MAX_STEPS] * 2
+    (line,) = fit.warnings
+    assert line.startswith("2 fit(s) ended MAX_STEPS: 0; 1:") and "step limit" in line
+    assert fit[0].warnings == [line.replace("2 fit(s) ended MAX_STEPS: 0; 1:", "1 fit(s) ended MAX_STEPS: the fit:")]
+
+
+@pytest.mark.data
+def test_max_steps_lane_is_in_the_json_warnings(capsys, data_root):
+    """CUReT's Roof Shingle under Cook-Torrance ends MAX_STEPS with the default solver (one of the 52 isotropic
+    samples that do)."""
+    assert main(["fit", "--dataset", "curet:roof shingle", "--model", "cook-torrance", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == ["MAX_STEPS"]
+    assert any("ended MAX_STEPS: Roof Shingle" in w for w in out["warnings"]), out["warnings"]

@@ -20,8 +20,9 @@ CURET_SETS = {"isotropic": ISOTROPIC_52, "table2": tuple(TABLE2_SAMPLES)}
 #: command and :func:`load`)
 FILE_KINDS = {".bsdf": "rgl", ".binary": "merl"}
 
-_KINDS = ("'curet:<sample>' (or 'curet:isotropic', 'curet:table2'), 'merl-nbrdf:<material>', 'nbrdf:<zip or folder>[:<material>,...]', "
-          "'cornell:<material>', 'merl:<path to .binary>' or 'rgl:<.bsdf file or name>' (a .bsdf or .binary file may be given by its path alone)")
+_KINDS = ("'curet:<sample>' (or 'curet:isotropic', 'curet:table2'), 'merl-nbrdf:<material>', "
+          "'nbrdf:<zip or folder>[:<material>,...]', 'cornell:<material>', 'merl:<path to .binary>' or "
+          "'rgl:<.bsdf file or name>' (a .bsdf or .binary file may be given by its path alone)")
 
 
 def dataset_spec(arg: str) -> str:
