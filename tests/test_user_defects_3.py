@@ -122,3 +122,56 @@ def test_max_steps_lane_is_in_the_json_warnings(capsys, data_root):
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == ["MAX_STEPS"]
     assert any("ended MAX_STEPS: Roof Shingle" in w for w in out["warnings"]), out["warnings"]
+
+
+# ---------------------------------------------------------------- 1, 3: RGL files as standard materials; subsample
+@pytest.fixture(scope="module")
+def half_bsdf(tmp_path_factory):
+    return write_tensor_file(tmp_path_factory.mktemp("rgl") / "half.bsdf", rgl_fields(seed=3))
+
+
+@pytest.mark.slow
+def test_export_rgl_file_to_gltf_fits_the_standard_material(capsys, tmp_path, half_bsdf):
+    """Item 1 (and 3: a data set on the MERL grid is fitted on the stated default subsample)."""
+    out = tmp_path / "half.glb"
+    assert main(["export", str(half_bsdf), "--to", "gltf", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "fitting gltf-pbr to 20000 samples of" in printed and f"wrote {out} (gltf)" in printed
+    doc = json.loads(out.read_bytes()[20:20 + int.from_bytes(out.read_bytes()[12:16], "little")])
+    assert doc["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] > 0
+
+
+def test_export_subsample_default_is_stated_and_checked_before_any_work(capsys, tmp_path, half_bsdf):
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default 20000 of a data set on the MERL grid" in text and "'all'" in text
+    assert main(["export", f"rgl:{half_bsdf}", "--to", "usd", "--subsample", "12",
+                 "--out", str(tmp_path / "x.usda")]) == 2
+    _one_error_line(capsys, "--subsample", "'all'")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------- 5: a plugin of another class wins on the log metric
+def test_mitsuba_plugin_of_another_class_must_win_on_the_log_metric():
+    """The satin film's numbers (20,000 bins): roughconductor's L2 within 5 % of principled's, its log-space error
+    twice principled's; principled fitted a dielectric."""
+    l2 = {"roughconductor": 0.2126, "roughplastic": 0.2243, "principled": 0.2178}
+    logs = {"roughconductor": 0.118, "roughplastic": 0.0535, "principled": 0.0537}
+    choose = pj.export.choose_mitsuba_plugin
+    assert choose(l2, 0.05) == "roughconductor"  # the L2 alone (the rule before)
+    assert choose(l2, 0.05, log_errors=logs, principled_class="dielectric") == "roughplastic"
+    assert choose(l2, 0.02, log_errors=logs, principled_class="dielectric") == "principled"
+    assert choose(l2, 0.05, log_errors=logs, principled_class="metal") == "roughconductor"
+    assert choose(l2, 0.05, log_errors=dict(logs, roughconductor=0.05), principled_class="dielectric") \
+        == "roughconductor"
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_satin_film_export_to_mitsuba_xml_is_not_a_metal(capsys, tmp_path, data_root):
+    out = tmp_path / "satin.xml"
+    assert main(["export", "rgl:satin_rosaline_rgb", "--to", "mitsuba-xml", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "principled fitted a dielectric" in printed and "chosen: roughconductor" not in printed
+    assert 'type="roughconductor"' not in out.read_text()
