@@ -175,3 +175,33 @@ def test_satin_film_export_to_mitsuba_xml_is_not_a_metal(capsys, tmp_path, data_
     printed = capsys.readouterr().out
     assert "principled fitted a dielectric" in printed and "chosen: roughconductor" not in printed
     assert 'type="roughconductor"' not in out.read_text()
+
+
+# ---------------------------------------------------------------- 2: Ctrl-C
+@pytest.mark.slow
+def test_ctrl_c_during_a_long_export_stops_within_two_seconds_with_one_line(tmp_path, half_bsdf):
+    """SIGINT while the standard material is fitted to all 1.1 M bins (minutes of work): exit 130 within two
+    seconds of the signal, ``interrupted`` alone on stderr (no traceback), no output or temporary file left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out" / "half.glb"
+    out.parent.mkdir()
+    env = dict(os.environ, POLYJAX_PROGRESS="off")
+    proc = subprocess.Popen([sys.executable, "-m", "polyjax", "export", str(half_bsdf), "--to", "gltf",
+                             "--subsample", "all", "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    line = proc.stdout.readline()  # printed once the data is loaded, as the long fit starts
+    assert line.startswith("fitting gltf-pbr to 1111432 samples"), (line, proc.stderr.read())
+    time.sleep(2.0)  # inside the fit
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    seconds = time.perf_counter() - t0
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err, err
+    assert seconds < 2.5, seconds
+    assert list(out.parent.iterdir()) == []

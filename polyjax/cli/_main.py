@@ -15,6 +15,7 @@ import jax
 
 from .._cache.compilation import cache_disabled_by_env, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
+from .._run import interrupt
 from ._args import Parser, add_global_options
 from ._cache import cache_cap_bytes, trim_cache
 
@@ -65,26 +66,35 @@ def _compilation_cache(args):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status (2 on a polyjax error)."""
+    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status (2 on a polyjax error,
+    130 on Ctrl-C: the program's own run, ``argv`` None, stops its work within a second or two, removes what it left
+    half made, prints ``interrupted``: :mod:`polyjax._run.interrupt`)."""
+    if argv is None:
+        interrupt.install()
     jax.config.update("jax_enable_x64", True)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if args.command is None:
         args.func = _command_module(COMMANDS["report"]).cmd_report
+    for flag in ("out", "save"):  # what Ctrl-C may leave half made
+        if isinstance(getattr(args, flag, None), str):
+            interrupt.watch_output(getattr(args, flag))
     try:
         args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
         return int(args.func(args) or 0)
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C (Interrupted, or Python's own where the handler is not installed)
+        return interrupt.finish()
     finally:
         _trim(getattr(args, "cache_in_use", None))
 
 
 def _trim(folder) -> None:
     """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`)."""
-    if folder is None:
+    if folder is None or interrupt.interrupted():
         return
     try:
         trim_cache(folder, cache_cap_bytes())

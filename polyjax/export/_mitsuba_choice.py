@@ -22,6 +22,7 @@ import numpy as np
 from .._errors import InputError
 from .._io import fitter_for
 from .._metrics import log_error
+from .._run.interrupt import check_interrupt
 
 #: the Mitsuba plugins ``--to mitsuba-xml`` chooses from, simplest first (each a model of that name)
 PLUGINS = ("roughconductor", "roughplastic", "principled")
@@ -72,6 +73,7 @@ def fit_plugin(data, plugin: str, tolerance: float):
         raise InputError(f"--tolerance: expected a finite number >= 0, found {tolerance!r}")
     fits, errors, logs = {}, {}, {}
     for name in PLUGINS if plugin == "auto" else (plugin,):
+        check_interrupt()  # Ctrl-C between the plugins' fits
         kind, model_name = fitter_for(name)
         fits[name] = kind.fit(model_name, data)
         errors[name] = float(np.mean(np.asarray(fits[name].l2)))
