@@ -3,9 +3,16 @@ subsample of standard exports, exporters that take what the others take, the Mit
 class, abbreviations of aliased flags, MAX_STEPS lanes in the warnings, ``curet:isotropic``, bare data paths)."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
+from _standard_problems import grey_fit
 
 import baselines as bl
 import polyjax as pj
@@ -61,8 +68,6 @@ def test_curet_isotropic_is_the_papers_52_samples(capsys, data_root):
 
 
 def test_curet_isotropic_is_listed_in_the_data_docs():
-    from pathlib import Path
-
     text = (Path(__file__).parents[1] / "docs" / "data.md").read_text()
     assert "curet:isotropic" in text and "ISOTROPIC_52" in text
 
@@ -93,8 +98,6 @@ def test_data_root_help_lists_every_folder_read(capsys):
     ("openpbr", "materialx", ".mtlx"), ("usd-preview", "usd", ".usda")])
 def test_materialx_and_usd_take_a_fit_as_gltf_does(tmp_path, name, writer, suffix):
     pytest.importorskip("MaterialX" if writer == "materialx" else "pxr")
-    from _standard_problems import grey_fit
-
     fit = grey_fit(name)[-1]
     write = getattr(pj.export, writer)
     a, b = write(fit, tmp_path / f"fit{suffix}"), write(fit.material(), tmp_path / f"dict{suffix}")
@@ -182,12 +185,6 @@ def test_satin_film_export_to_mitsuba_xml_is_not_a_metal(capsys, tmp_path, data_
 def test_ctrl_c_during_a_long_export_stops_within_two_seconds_with_one_line(tmp_path, half_bsdf):
     """SIGINT while the standard material is fitted to all 1.1 M bins (minutes of work): exit 130 within two
     seconds of the signal, ``interrupted`` alone on stderr (no traceback), no output or temporary file left."""
-    import os
-    import signal
-    import subprocess
-    import sys
-    import time
-
     out = tmp_path / "out" / "half.glb"
     out.parent.mkdir()
     env = dict(os.environ, POLYJAX_PROGRESS="off")
