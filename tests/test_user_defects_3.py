@@ -94,6 +94,7 @@ def test_data_root_help_lists_every_folder_read(capsys):
 
 
 # ---------------------------------------------------------------- 4: every exporter takes what the others take
+@pytest.mark.slow
 @pytest.mark.parametrize("name, writer, suffix", [
     ("openpbr", "materialx", ".mtlx"), ("usd-preview", "usd", ".usda")])
 def test_materialx_and_usd_take_a_fit_as_gltf_does(tmp_path, name, writer, suffix):
@@ -107,6 +108,7 @@ def test_materialx_and_usd_take_a_fit_as_gltf_does(tmp_path, name, writer, suffi
 
 
 # ---------------------------------------------------------------- 7: a lane ending MAX_STEPS is a warning
+@pytest.mark.slow
 def test_max_steps_lane_is_in_the_python_result_warnings():
     u, v = random_hemisphere(205, seed=3)
     b = 0.1 + u[:, 2] * v[:, 2] + 0.2 * u[:, 0] * v[:, 0]
@@ -117,6 +119,7 @@ def test_max_steps_lane_is_in_the_python_result_warnings():
     assert fit[0].warnings == [line.replace("2 fit(s) ended MAX_STEPS: 0; 1:", "1 fit(s) ended MAX_STEPS: the fit:")]
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_max_steps_lane_is_in_the_json_warnings(capsys, data_root):
     """CUReT's Roof Shingle under Cook-Torrance ends MAX_STEPS with the default solver (one of the 52 isotropic
