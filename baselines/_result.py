@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from polyjax import InputError, safe_normalize
+from polyjax.internal import status_warnings
 
 from ._models.common import BaselineModel
 from ._models.materials import channel_parameters
@@ -63,6 +64,13 @@ class BaselineFit(eqx.Module):
     @property
     def batch_shape(self) -> tuple[int, ...]:
         return tuple(self.l2.shape)
+
+    @property
+    def warnings(self) -> list[str]:
+        """One line per result code other than ``OK`` among the lanes: how many lanes ended with it (e.g.
+        ``MAX_STEPS``: the step limit reached before the tolerances; raise ``max_steps`` or ``n_starts``), which
+        (their indices in the batch, the first ten), and what the code means; ``[]`` when every lane is ``OK``."""
+        return status_warnings(np.asarray(self.status))
 
     def material(self, index=()) -> dict:
         """The fitted material ``index`` of a standard model, named as its specification names it

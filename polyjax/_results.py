@@ -115,3 +115,22 @@ def raise_on_status(caller: str, status, tree, describe=None):
     first_code = flat[jnp.argmax(bad)]
     msgs = tuple(f"{caller}: a fit ended with {c.name}: {message(c)}" for c in sorted(set(RESULTS)))
     return eqx.branched_error_if(tree, jnp.any(bad), first_code, msgs)
+
+
+def status_warnings(status, labels=None) -> list[str]:
+    """One line per result code other than ``OK`` among the lanes of ``status`` (codes, any shape): how many lanes
+    ended with it, which (``labels``, one name per lane in C order, else the lanes' batch indices; the first ten)
+    and what the code means (``MAX_STEPS`` with the remedy); ``[]`` when every lane is ``OK``."""
+    status = np.asarray(status)
+    flat = status.ravel()
+    if labels is None:
+        labels = [",".join(map(str, i)) for i in np.ndindex(*status.shape)] if status.ndim else ["the fit"]
+    known = {int(m) for m in RESULTS}
+    out = []
+    for code in sorted({int(c) for c in flat} - {int(RESULTS.OK)}):
+        lanes = [labels[i] for i in np.flatnonzero(flat == code)]
+        shown = "; ".join(lanes[:10]) + (f"; ... ({len(lanes) - 10} more)" if len(lanes) > 10 else "")
+        name, what = (RESULTS(code).name, RESULTS(code).message) if code in known else (str(code), "unknown code")
+        hint = " (raise max_steps or n_starts)" if code == int(RESULTS.MAX_STEPS) else ""
+        out.append(f"{len(lanes)} fit(s) ended {name}: {shown}: {what}{hint}")
+    return out

@@ -12,7 +12,7 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   array cast on the host, no compiled program): a fitter's or a model's eager steps without programs of their own;
 - solves: :data:`TALL_ROWS` (the rows from which :func:`polyjax.weighted_lstsq` factorises by CholeskyQR2: a
   fitter, or a check of one, that sizes a problem for that path);
-- results: :func:`raise_on_status` (``throw=`` of every fitter), :func:`result_message`;
+- results: :func:`raise_on_status` (``throw=`` of every fitter), :func:`result_message`, :func:`status_warnings`;
 - LAPACK: :func:`one_lapack_thread` (decorate a public fitter: jaxlib's LAPACK library limited before it runs);
 - saved models: :class:`ModelKind`, :func:`module_kind`, :func:`register_model_kind`, :func:`model_kinds`,
   :func:`kind_named`, :func:`kind_of`, :func:`fitter_for` (``polyjax.save_model``/``load_model`` and
@@ -44,7 +44,7 @@ from ._inputs import PreparedInputs, check_parameter_count, prepare_inputs
 from ._io import ModelKind, fitter_for, kind_named, kind_of, model_kinds, module_kind, register_model_kind
 from ._metrics import fit_weights
 from ._results import message as result_message
-from ._results import raise_on_status
+from ._results import raise_on_status, status_warnings
 from ._solve.lstsq import TALL_ROWS
 from ._solve.threads import one_lapack_thread
 
@@ -56,6 +56,7 @@ __all__ = [
     "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
     "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
+    "status_warnings",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
 ]

@@ -8,19 +8,25 @@
 - :mod:`.inside`: paths written inside input files stay inside the input's folder (:func:`inside_folder`).
 """
 
-from .atomic import check_output_path, write_atomically, write_bytes_atomically, write_npz_atomically
+from .atomic import (
+    check_output_path,
+    remove_temporary_files,
+    write_atomically,
+    write_bytes_atomically,
+    write_npz_atomically,
+)
 from .inside import inside_folder
 from .trust import (
-                    MARKER,
-                    UntrustedFolderWarning,
-                    is_polyjax_folder,
-                    make_cache_folder,
-                    mark_cache_folder,
-                    trusted,
-                    untrusted_reason,
-                    warn_untrusted,
+    MARKER,
+    UntrustedFolderWarning,
+    is_polyjax_folder,
+    make_cache_folder,
+    mark_cache_folder,
+    trusted,
+    untrusted_reason,
+    warn_untrusted,
 )
 
 __all__ = ["MARKER", "UntrustedFolderWarning", "check_output_path", "inside_folder", "is_polyjax_folder",
-           "make_cache_folder", "mark_cache_folder", "trusted", "untrusted_reason", "warn_untrusted",
-           "write_atomically", "write_bytes_atomically", "write_npz_atomically"]
+           "make_cache_folder", "mark_cache_folder", "remove_temporary_files", "trusted", "untrusted_reason",
+           "warn_untrusted", "write_atomically", "write_bytes_atomically", "write_npz_atomically"]

@@ -87,6 +87,10 @@ def _fsync_path(path: str | os.PathLike) -> None:
         os.close(fd)
 
 
+#: the temporary files of the writes under way in this process (a set: several threads may write at once)
+_IN_FLIGHT: set[Path] = set()
+
+
 def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *, mode: int | None = None) -> Path:
     """Write ``path`` whole or not at all.
 
@@ -114,6 +118,7 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *
     os.close(fd)
     tmp = Path(name)
     done = False
+    _IN_FLIGHT.add(tmp)
     try:
         write(tmp)
         _fsync_path(tmp)
@@ -123,8 +128,18 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *
     finally:
         if not done:
             tmp.unlink(missing_ok=True)
+        _IN_FLIGHT.discard(tmp)
     _fsync_path(folder)
     return path
+
+
+def remove_temporary_files() -> None:
+    """Remove the temporary files of the writes under way in this process (exactly those :func:`write_atomically`
+    made, nothing else): for a process that ends before their ``finally`` runs (Ctrl-C's watchdog,
+    :mod:`polyjax._run.interrupt`)."""
+    for tmp in list(_IN_FLIGHT):
+        Path(tmp).unlink(missing_ok=True)
+        _IN_FLIGHT.discard(tmp)
 
 
 def write_bytes_atomically(path: str | os.PathLike, data: bytes, *, mode: int | None = None) -> Path:

@@ -23,13 +23,34 @@ BUILTIN_VARIABLES = ("lafortune", "lafortune-anisotropic", "ward", "ashikhmin-sh
                      "rusinkiewicz-phid")
 
 
-ROOT_HELP = ("measured data folder holding curet/, cornell/, nbrdf_sztrajman2021/ (default: $POLYJAX_DATA); "
-             "a folder given that does not exist is an error")
+#: the folders below the data root that polyjax and baselines read
+DATA_FOLDERS = ("curet/", "cornell/", "nbrdf_sztrajman2021/", "rgl_epfl/", "published_fits/")
+ROOT_HELP = (f"measured data folder holding {', '.join(DATA_FOLDERS[:-1])} and {DATA_FOLDERS[-1]} (default: "
+             "$POLYJAX_DATA); a folder given that does not exist is an error")
 CACHE_HELP = ("folder of JAX's persistent compilation cache, which lets later runs skip compiling (default: "
               "$POLYJAX_CACHE, else $XDG_CACHE_HOME/polyjax/jax or ~/.cache/polyjax/jax); a folder polyjax creates "
               "is its own (mode 0700, a marker file): only its own entries there are ever trimmed or cleared, and "
               "nothing in a folder it did not create")
 NO_CACHE_HELP = "do not read or write the compilation cache (also: POLYJAX_CACHE=off)"
+
+
+class Parser(argparse.ArgumentParser):
+    """The command line's parser: an abbreviation matching several spellings of one option (``--degre`` for
+    ``--degree`` / ``--degrees``) is that option, not ambiguous, and every parse error is one line on stderr,
+    ``polyjax: error: ...`` (exit status 2), as ``docs/command-line.md`` promises."""
+
+    def _get_option_tuples(self, option_string):
+        seen, out = set(), []
+        for tup in super()._get_option_tuples(option_string):
+            if id(tup[0]) not in seen:  # one entry per option, whatever its aliases
+                seen.add(id(tup[0]))
+                out.append(tup)
+        return out
+
+    def error(self, message):
+        """One line on stderr, ``polyjax: error: <message>`` (the usage is in ``--help``), then exit 2."""
+        self.exit(2, f"polyjax: error: {message.splitlines()[0] if message else 'bad arguments'} (see "
+                  f"{self.prog} --help)\n")
 
 
 def add_global_options(p: argparse.ArgumentParser, default=None) -> argparse.ArgumentParser:

@@ -123,9 +123,13 @@ def run_export(args) -> int:
 
 
 def _run_rgl_export(args) -> int:
-    """``polyjax export <file.bsdf or rgl:spec> --to merl``: an RGL-EPFL measured BSDF as a MERL ``.binary``."""
+    """``polyjax export <file.bsdf or rgl:spec> --to merl``: an RGL-EPFL measured BSDF as a MERL ``.binary``;
+    ``--to gltf|mitsuba-xml|openpbr|usd``: the standard material fitted to it, as to any data set."""
+    if args.to in TARGETS:
+        return run_standard_export(args)
     if args.to != "merl":
-        raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl' only, found {args.to!r}")
+        raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl', {', '.join(sorted(TARGETS))}, found "
+                            f"{args.to!r}")
     name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
     out = check_output_file(Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"]), "--out")
     rgl_to_merl(name, out, root=getattr(args, "data_root", None))

@@ -6,7 +6,11 @@ The standard model is fitted by the package that provides it (``baselines``, fou
 kind, :func:`polyjax._io.fitter_for`): R, G, B jointly, paper equation (11) with the 80-degree cutoff. A saved
 model is tabulated first at ``--samples`` random direction pairs (uniform in solid angle, equal weights, a quarter
 of the views near the mirror direction so that glossy lobes are sampled), a data set (``merl-nbrdf:<name>``,
-``merl:<file>``, ``cornell:<name>``, ...) is used as loaded (``--subsample``).
+``merl:<file>``, ``rgl:<file>``, ``cornell:<name>``, ...) is used as loaded; a data set on the MERL grid
+(:data:`SUBSAMPLED_KINDS`) on a seeded subsample of :data:`DEFAULT_SUBSAMPLE` of its bins unless ``--subsample``
+says otherwise (``all``: every bin, 1.1 M of them, minutes and gigabytes). The default loses little: on the full grid
+the material fitted to 20,000 bins has an L2 and a log-space error within a few per cent of the one fitted to every
+bin (``benchmarks/RESULTS.md``, "Standard exports of measured data: the default subsample").
 
 A saved capture fit (:class:`polyjax.CaptureFit`) exported ``--to gltf`` is written as a ``.glb`` card instead
 (:mod:`polyjax.cli._capture_out`, :func:`polyjax.export.gltf_card`): the image plane as a quad with the fit's
@@ -26,10 +30,12 @@ import numpy as np
 import polyjax as pj
 
 from .. import export
+from .._errors import InputError
 from .._files import check_output_path
 from .._io import fitter_for
 from ..export._mitsuba_choice import PLUGINS, TOLERANCE, fit_plugin
 from ._capture_out import capture_fit_of, run_card_export
+from ._progress import progress_line
 
 #: target -> (standard model fitted, writer in :mod:`polyjax.export`, default suffix)
 TARGETS: dict[str, tuple[str, str, str]] = {
@@ -40,12 +46,21 @@ TARGETS: dict[str, tuple[str, str, str]] = {
 }
 
 
+#: the samples of a data set on the MERL grid that a standard export fits unless ``--subsample`` says otherwise
+DEFAULT_SUBSAMPLE = 20000
+#: the data set kinds on the MERL grid (1,111,432 bins), subsampled by default
+SUBSAMPLED_KINDS = ("merl", "merl-nbrdf", "merl_nbrdf", "nbrdf", "rgl")
+
+
 def add_standard_arguments(p) -> None:
     """The options of the standard targets, added to ``polyjax export``'s parser."""
     p.add_argument("--samples", type=int, default=20000,
                    help="direction pairs a saved model is tabulated at (--to gltf, mitsuba-xml, openpbr, usd)")
-    p.add_argument("--subsample", type=int, default=None,
-                   help="keep this many samples of a measured data set (--to gltf, mitsuba-xml, openpbr, usd)")
+    p.add_argument("--subsample", default=None,
+                   help="keep this many samples of a measured data set, or 'all' (--to gltf, mitsuba-xml, openpbr, "
+                   f"usd; default {DEFAULT_SUBSAMPLE} of a data set on the MERL grid: merl:, merl-nbrdf:, nbrdf:, "
+                   "rgl:, whose 1.1 M bins take minutes and gigabytes to fit, for a material within a few per cent "
+                   "of the same error)")
     p.add_argument("--plugin", default="auto", choices=("auto",) + PLUGINS,
                    help="the Mitsuba plugin written (--to mitsuba-xml); auto: the simplest of "
                    f"{', '.join(PLUGINS)} whose L2 is within --tolerance of principled's")
@@ -81,9 +96,26 @@ def _source(args):
         u, v, values = _tabulated(pj.load_model(src), args.samples)
         data = pj.make_measurements(u, v, values, source=src)
     else:
-        options = {} if args.subsample is None else {"subsample": int(args.subsample)}
-        data = pj.data.load(src, root=getattr(args, "data_root", None), **options)
+        src = pj.data.dataset_spec(src)
+        data = pj.data.load(src, root=getattr(args, "data_root", None), **_subsample_option(args.subsample, src))
     return _one_material(data, args.index, src)
+
+
+def _subsample_option(text, spec: str) -> dict:
+    """The loader's ``subsample`` option of ``--subsample`` (``text``: None, an integer, or ``all``) for the data
+    set ``spec``: :data:`DEFAULT_SUBSAMPLE` for a data set on the MERL grid when not given, nothing for ``all``."""
+    grid = spec.partition(":")[0].strip().lower() in SUBSAMPLED_KINDS
+    if text is None:
+        return {"subsample": DEFAULT_SUBSAMPLE} if grid else {}
+    if str(text).strip().lower() == "all":
+        return {}
+    try:
+        n = int(str(text))
+    except ValueError:
+        n = 0
+    if n < 100:
+        raise InputError(f"--subsample: expected an integer >= 100 or 'all', found {text!r}")
+    return {"subsample": n}
 
 
 def _one_material(data, index, src):
@@ -115,16 +147,24 @@ def run_standard_export(args) -> int:
     """Fit the target's standard model to ``args.model`` and write it (see the module docs)."""
     jax.config.update("jax_enable_x64", True)
     name, writer, suffix = TARGETS[args.to]
-    out = check_output_path(Path(args.out) if args.out else Path(Path(str(args.model)).stem + suffix), "--out")
+    src = str(args.model)
+    base = src.partition(":")[2] if ":" in src and not Path(src).exists() else src  # "rgl:satin" -> "satin"
+    out = check_output_path(Path(args.out) if args.out else Path(Path(base.split(",")[0].strip()).stem + suffix),
+                            "--out")
     capture_fit = capture_fit_of(str(args.model)) if args.to == "gltf" else None
     if capture_fit is not None:  # a capture fit: the .glb card of its maps
         return run_card_export(args, capture_fit, out)
     kind, model_name = fitter_for(name)
-    data = _source(args)
-    if args.to == "mitsuba-xml":  # the simplest Mitsuba plugin that fits as well as principled
-        model_name, fit = fit_plugin(data, args.plugin, args.tolerance)
-    else:
-        fit = kind.fit(model_name, data)
+    _subsample_option(args.subsample, "")  # checked before any work
+    with progress_line(f"loading {args.model}"):
+        data = _source(args)
+    what = ", ".join(PLUGINS) if args.to == "mitsuba-xml" and args.plugin == "auto" else model_name
+    print(f"fitting {what} to {data.values.shape[-1]} samples of {args.model} ...", flush=True)
+    with progress_line(f"fitting {what}"):
+        if args.to == "mitsuba-xml":  # the simplest Mitsuba plugin that fits as well as principled
+            model_name, fit = fit_plugin(data, args.plugin, args.tolerance)
+        else:
+            fit = kind.fit(model_name, data)
     pred = np.asarray(fit(np.asarray(data.u), np.asarray(data.v)))
     values = np.asarray(data.values)
     l2 = np.asarray(fit.l2)

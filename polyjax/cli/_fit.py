@@ -13,6 +13,7 @@ import polyjax as pj
 from .._config import check_model_file
 from .._fit.saved import fit_saved
 from .._io import fitter_for, kind_of
+from .._results import status_warnings
 from ._args import add_model_options, check_degrees_fit, load_dataset, spec_from_args, strict_json
 from ._progress import compile_notice, progress_line
 
@@ -132,6 +133,8 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
     zero, warnings_ = _zero_model_check(data, l2, labels, args.cutoff, zero)
     if polynomial:
         warnings_ += _condition_warning(np.asarray(model.condition), np.asarray(model.status), labels)
+    else:  # a lane that ended MAX_STEPS (or FAILED, NONFINITE) is named, as BaselineFit.warnings names it
+        warnings_ += status_warnings(np.asarray(model.status), labels)
     out = {
         "source": data.source,
         "synthetic": synthetic,

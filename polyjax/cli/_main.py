@@ -15,7 +15,8 @@ import jax
 
 from .._cache.compilation import cache_disabled_by_env, cache_uses, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
-from ._args import add_global_options
+from .._run import interrupt
+from ._args import Parser, add_global_options
 from ._cache import cache_cap_bytes, trim_cache
 
 #: every command and the module of this folder that defines it (in the order of ``polyjax --help``)
@@ -46,10 +47,10 @@ def _command_of(argv: list[str]) -> str | None:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of ``command`` alone (only its module is imported: a shorter start for ``polyjax fit``), or of every
     command when ``command`` is None or not one of :data:`COMMANDS`."""
-    p = argparse.ArgumentParser(prog="polyjax",
+    p = Parser(prog="polyjax",
                                 description="Fit polynomial (and baseline) BRDF models to measured data.")
     add_global_options(p)
-    common = add_global_options(argparse.ArgumentParser(add_help=False), argparse.SUPPRESS)
+    common = add_global_options(Parser(add_help=False), argparse.SUPPRESS)
     sub = p.add_subparsers(dest="command")
     modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
     for name in modules:
@@ -68,7 +69,11 @@ def _compilation_cache(args):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status (2 on a polyjax error)."""
+    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status (2 on a polyjax error,
+    130 on Ctrl-C: the program's own run, ``argv`` None, stops its work within a second or two, removes what it left
+    half made, prints ``interrupted``: :mod:`polyjax._run.interrupt`)."""
+    if argv is None:
+        interrupt.install()
     jax.config.update("jax_enable_x64", True)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
@@ -76,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         args.func = _command_module(COMMANDS["report"]).cmd_report
     uses, status = cache_uses(), 2
+    for flag in ("out", "save"):  # what Ctrl-C may leave half made
+        if isinstance(getattr(args, flag, None), str):
+            interrupt.watch_output(getattr(args, flag))
     try:
         args.cache_in_use = None if args.command == "cache" else _compilation_cache(args)
         status = int(args.func(args) or 0)
@@ -83,14 +91,17 @@ def main(argv: list[str] | None = None) -> int:
     except PolyjaxError as e:
         print(f"polyjax: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C (Interrupted, or Python's own where the handler is not installed)
+        status = interrupt.finish()
+        return status
     finally:  # a run that looked the cache up or wrote to it, or that ran to its end, opened it
         _trim(getattr(args, "cache_in_use", None), cache_uses() > uses or status == 0)
 
 
 def _trim(folder, opened: bool) -> None:
     """The cache folder's size cap, applied after a run that used it (:mod:`polyjax.cli._cache`): not after a run that
-    never opened it (``opened`` False: one that failed on its arguments, say)."""
-    if folder is None or not opened:
+    never opened it (``opened`` False: one that failed on its arguments, say), nor after Ctrl-C."""
+    if folder is None or not opened or interrupt.interrupted():
         return
     try:
         trim_cache(folder, cache_cap_bytes())

@@ -35,7 +35,7 @@ from ._errors import (
     UnknownMaterialError,
     WrongFormatError,
 )
-from ._load import load
+from ._load import CURET_SETS, dataset_spec, load
 from ._merl import (
     MERL_N_BINS,
     MERL_NAMES,
@@ -86,6 +86,7 @@ def __dir__():
 __all__ = [
     "DATA_ENV", "data_root", "has_data_root", "ANISOTROPIC_SAMPLES", "ISOTROPIC_52", "TABLE2_SAMPLES",
     "ZOOMED_DUPLICATES", "curet_sample_names", "load_curet", "read_curet_geometry", "synthetic_default", "load",
+    "CURET_SETS", "dataset_spec",
     "CIE1931_CMF", "CMF_WAVELENGTHS", "XYZ_TO_SRGB", "spectral_to_luminance", "spectral_to_rgb", "spectral_to_xyz",
     "xyz_to_rgb_matrix", "CORNELL_NAMES", "load_cornell", "read_cornell_astm", "read_cornell_pbrt",
     "EmptyFileError", "HeaderError", "NonFiniteValueError", "TruncatedFileError", "UnknownMaterialError",

@@ -86,9 +86,13 @@ def checked_inputs(what: str, material, models: tuple[str, ...], scalars: dict, 
     return {k: tuple(out[k]) if k in colors else out[k] for k in spec if k in out}
 
 
-def material_of(material) -> dict:
-    """The dictionary of ``material``: a dict, or an object whose ``material()`` returns one (a fit of one
-    material of a standard model, e.g. ``baselines.fit("gltf-pbr", ...)``)."""
+def material_of(material, what: str | None = None) -> dict:
+    """The dictionary of ``material``: a dict, or a fit whose ``material()`` returns one (a fit of one material of
+    a standard model, e.g. ``baselines.fit("gltf-pbr", ...)``): what every standard-material exporter takes.
+
+    Raises:
+        InputError: naming ``what`` (the exporter; else ``material``), for anything else.
+    """
     if isinstance(material, dict):
         return material
     method = getattr(material, "material", None)
@@ -96,9 +100,10 @@ def material_of(material) -> dict:
         out = method()
         if isinstance(out, dict):
             return out
-    raise InputError(f"material: expected a standard material dict (see baselines.standard_material) or a fit with "
-                     f"a material() method, found {type(material).__name__}")
-
+    kind = "a standard material dict" if what is None else "a material dict (BaselineModel.to_material)"
+    raise InputError(f"{what or 'material'}: expected {kind} (see baselines.standard_material) or a fit with a "
+                     f"material() method (a baselines.BaselineFit of a standard model), found "
+                     f"{type(material).__name__}")
 
 
 def output_path(what: str, path, suffix: str) -> Path:

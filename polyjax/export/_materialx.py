@@ -23,7 +23,7 @@ from pathlib import Path
 
 from .._errors import InputError
 from .._files import write_atomically
-from ._material import checked_inputs, format_float, output_path
+from ._material import checked_inputs, format_float, material_of, output_path
 
 _WHAT = "materialx"
 #: OpenPBR inputs written, with their ranges (``ND_open_pbr_surface_surfaceshader``'s ``uimin``/``uimax``).
@@ -89,7 +89,7 @@ def _add_shader(mx, doc, category: str, name: str, inputs: dict):
     doc.addMaterialNode(f"M_{name}", node)
 
 
-def materialx(material: dict, path: str | os.PathLike, *, name: str = "fitted") -> Path:
+def materialx(material, path: str | os.PathLike, *, name: str = "fitted") -> Path:
     """Write an OpenPBR material as a MaterialX document: materials ``M_<name>_openpbr`` (an ``open_pbr_surface``)
     and ``M_<name>_standard_surface`` (module docs for the translation).
 
@@ -107,7 +107,7 @@ def materialx(material: dict, path: str | os.PathLike, *, name: str = "fitted") 
         InputError: a missing or unknown input, a value out of its range, a UsdPreviewSurface material, a bad path.
         ImportError: MaterialX is not installed (``pip install 'polyjax[materialx]'``).
     """
-    p = check_openpbr(material)
+    p = check_openpbr(material_of(material, _WHAT))
     out = output_path(_WHAT, path, ".mtlx")
     mx = _import_materialx()
     if not mx.isValidName(name):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from .._errors import InputError
 from .._files import write_atomically
-from ._material import checked_inputs, output_path
+from ._material import checked_inputs, material_of, output_path
 
 _WHAT = "usd"
 SCALARS = {"useSpecularWorkflow": (0.0, 1.0), "metallic": (0.0, 1.0), "roughness": (0.0, 1.0), "ior": (1.0, None),
@@ -74,7 +74,7 @@ def _define(stage, p: dict, name: str, sphere: bool):
         UsdShade.MaterialBindingAPI.Apply(ball.GetPrim()).Bind(material)
 
 
-def usd(material: dict, path: str | os.PathLike, *, name: str = "Fitted", sphere: bool = True) -> Path:
+def usd(material, path: str | os.PathLike, *, name: str = "Fitted", sphere: bool = True) -> Path:
     """Write a UsdPreviewSurface material as a ``.usda`` stage (module docs for its layout).
 
     Args:
@@ -92,7 +92,7 @@ def usd(material: dict, path: str | os.PathLike, *, name: str = "Fitted", sphere
         InputError: a missing or unknown input, a value out of its range, an OpenPBR material, a bad path or name.
         ImportError: usd-core is not installed (``pip install 'polyjax[usd]'``).
     """
-    p = check_usd_preview(material)
+    p = check_usd_preview(material_of(material, _WHAT))
     out = output_path(_WHAT, path, ".usda")
     Gf, Sdf, Usd, UsdGeom, UsdShade = _import_pxr()
     if not Sdf.Path.IsValidIdentifier(name):

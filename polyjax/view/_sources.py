@@ -23,6 +23,7 @@ def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION, lights=
     ``merl-nbrdf:green-latex``, ``cornell:cayman``, ``merl:<file>``, ``rgl:<file>``: :mod:`polyjax.view._rgl`)."""
     if Path(arg).is_dir():
         return capture_items(pj.data.load_photometric(arg, lights), Path(arg).name, source=f"capture {arg}")
+    arg = pj.data.dataset_spec(arg)  # a bare .bsdf / .binary path: the rule of every command
     if arg.strip().lower().startswith("rgl:"):
         return rgl_items(arg, root, resolution)
     path, sep, index = arg.rpartition("#")
@@ -42,7 +43,7 @@ def items_from_argument(arg: str, root=None, resolution=MERL_RESOLUTION, lights=
     if ":" not in arg:
         raise InputError(f"{arg!r}: expected a saved model (.npz or .json), a capture's folder or a data set spec "
                          "such as curet:25, merl-nbrdf:green-latex, cornell:cayman, merl:<file.binary>, "
-                         "rgl:<file.bsdf>")
+                         "rgl:<file.bsdf> (or a .bsdf or .binary file by its path alone)")
     return data_items(pj.data.load(arg, root=root), arg, resolution)
 
 
