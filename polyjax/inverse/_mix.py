@@ -2,8 +2,9 @@ r"""The BRDF solves of :func:`polyjax.fit_capture`, with the normals fixed.
 
 **Per pixel** (:func:`solve_mix`): the pixel's prediction ``max(n . d_l, 0) (rho_c / pi + sum_k m_k g_{k,c}(u_l,
 v))`` is linear in its diffuse albedo ``rho (3,)`` and lobe weights ``m (K,)``: a weighted least-squares solve of the
-``(3 L, 3 + K)`` design by SVD, then the columns of negative coefficients dropped and the solve repeated (an
-active-set pass of non-negative least squares, ``K + 1`` rounds), vmapped over the block's pixels.
+``(3 L, 3 + K)`` design by QR, then the columns of negative coefficients dropped and the solve repeated (an
+active-set pass of non-negative least squares, ``K + 1`` rounds), vmapped over the block's pixels; ``rho`` is at most
+``pi max_l obs_l / 0.2`` (:data:`MIN_BRIGHTEST_COS`).
 
 **Shared lobes** (:func:`fit_lobes`): each pixel belongs to the lobe of its largest weight; lobe ``k``'s polynomial
 BRDF (per channel, Rusinkiewicz ``theta_h, theta_d``, clamped to the fitted box so it stays bounded) is fitted in
@@ -87,6 +88,11 @@ def shade_table(n, rho, mix, directions, table):
     return cos[:, None] * (rho / jnp.pi + jnp.einsum("k,klc->lc", mix, g))
 
 
+#: the diffuse albedo is at most what the pixel's brightest value gives at this cosine: a pixel whose normal turns
+#: away from every fitted light (a dark pixel on the mask's edge) cannot take an albedo that explodes under new lights
+MIN_BRIGHTEST_COS = 0.2
+
+
 def _mix_pixel(n, obs, w, directions, table):
     """One pixel's ``(rho (3,), mix (K,))`` by the active-set solve of the module notes."""
     cos, g = table_shading(n, directions, table)
@@ -101,7 +107,8 @@ def _mix_pixel(n, obs, w, directions, table):
         x = small_lstsq(a, obs.reshape(-1) * sw) * keep
         keep = keep & (x >= 0)
     x = jnp.maximum(x, 0.0)
-    return x[:3], x[3:]
+    bound = jnp.pi * jnp.max(obs, axis=0) / MIN_BRIGHTEST_COS
+    return jnp.minimum(x[:3], bound), x[3:]
 
 
 def solve_mix(normals, obs, w, directions, table):
@@ -139,5 +146,5 @@ def fit_lobes(normals, obs, w, rho, mix, directions, degree: int = LOBE_DEGREE) 
                           cutoff_deg=None, interactions=True, clamp=True)
 
 
-__all__ = ["LOBE_DEGREE", "LOBE_VARIABLES", "TABLE_SIZE", "fit_lobes", "lobe_table", "lobe_values", "pixel_shading",
-           "shade", "shade_table", "solve_mix", "table_shading"]
+__all__ = ["LOBE_DEGREE", "LOBE_VARIABLES", "MIN_BRIGHTEST_COS", "TABLE_SIZE", "fit_lobes", "lobe_table", "lobe_values",
+           "pixel_shading", "shade", "shade_table", "solve_mix", "table_shading"]
