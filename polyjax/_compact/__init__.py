@@ -3,7 +3,7 @@
 (``fit``: :func:`fit_compact`) and its saved-model kind (``saving``)."""
 
 from . import saving  # noqa: F401 - registers the saved-model kind polyjax.CompactBRDF
-from .fit import BudgetError, fit_compact, fit_compact_family
+from .fit import BudgetError, compact_families, fit_compact, fit_compact_family
 from .model import CompactBRDF
 
-__all__ = ["BudgetError", "CompactBRDF", "fit_compact", "fit_compact_family"]
+__all__ = ["BudgetError", "CompactBRDF", "compact_families", "fit_compact", "fit_compact_family"]

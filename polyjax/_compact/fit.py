@@ -90,6 +90,12 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
     return CompactBRDF(params=params, l2=l2, log=lg, family=family, config=config)
 
 
+def compact_families() -> dict:
+    """The registered families of compact models, by name (each has ``configs(budget)``, ``n_numbers(config)``,
+    ``fit`` and ``evaluate``: ``polyjax/_compact/families/__init__.py``)."""
+    return dict(FAMILIES)
+
+
 def fit_compact_family(data: Measurements, family: str, config, *, metric: str = "log") -> CompactBRDF:
     """One family's configuration fitted on every sample of ``data``, no choice (``l2``/``log`` NaN): the
     benchmarks' and tests' way to a given model."""
