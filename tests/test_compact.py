@@ -28,7 +28,7 @@ def fitted(two):
 
 def test_choice_within_budget_and_held_out_errors(two, fitted):
     assert fitted.n_numbers <= 9 and fitted.family in pj.compact_families()
-    assert fitted.batch_shape == (2,)
+    assert fitted.materials_shape == (2,) and fitted.batch_shape == (2, 3)
     assert np.all(np.isfinite(np.asarray(fitted.l2))) and np.all(np.asarray(fitted.log) > 0)
     # the held-out error is an honest one: at least the error on the fitted samples
     pred = fitted(two.u, two.v)
@@ -37,7 +37,7 @@ def test_choice_within_budget_and_held_out_errors(two, fitted):
     assert np.all(np.asarray(seen) <= np.asarray(fitted.log) * 1.05)
     # indexing a material gives that material's model
     one = fitted[1]
-    assert one.batch_shape == () and np.allclose(np.asarray(one(two.u, two.v)), np.asarray(pred[1]))
+    assert one.batch_shape == (3,) and np.allclose(np.asarray(one(two.u, two.v)), np.asarray(pred[1]))
 
 
 @pytest.mark.slow
@@ -117,3 +117,17 @@ def test_no_blow_up_on_the_merl_grid(data_root):
 @pytest.mark.parametrize("budget", [9, 64, 256])
 def test_no_blow_up_on_the_merl_grid_every_material(data_root, budget):
     _sweep(SLOW_MATERIALS, budget)
+
+
+def test_exports_and_view_tabulate_the_compact_model(tmp_path, fitted, capsys):
+    one = fitted[0]
+    path = pj.save_model(tmp_path / "c.npz", fitted)
+    assert main(["export", str(path), "--index", "0", "--to", "glsl", "--out", str(tmp_path / "c.glsl")]) == 0
+    assert "vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)" in (tmp_path / "c.glsl").read_text()
+    assert main(["export", str(path), "--to", "glsl", "--out", str(tmp_path / "d.glsl")]) == 2
+    assert "--index" in capsys.readouterr().err
+    values, valid = pj.export.tabulate_merl(one, (4, 4, 8))
+    assert values.shape == (3, 128) and np.all(np.asarray(values)[:, valid] >= 0)
+    (item,) = pj.view.as_items([("c", one)], resolution=(4, 4, 8))
+    assert item.kind == "table" and item.info["family"] == one.family
+    assert item.info["numbers per material"] == one.n_numbers

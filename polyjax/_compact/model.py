@@ -56,8 +56,15 @@ class CompactBRDF(eqx.Module):
         family_named(self.family)
 
     @property
-    def batch_shape(self) -> tuple[int, ...]:
+    def materials_shape(self) -> tuple[int, ...]:
+        """The materials' axes ``(*batch)``."""
         return tuple(jnp.shape(self.l2))
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The leading axes of the model's values, ``(*batch, 3)`` (materials, then channels), as every fitted
+        model's: one material is ``(3,)``, an RGB BRDF to the renderer, the exporters and the viewer."""
+        return self.materials_shape + (3,)
 
     @property
     def n_numbers(self) -> int:
@@ -65,8 +72,8 @@ class CompactBRDF(eqx.Module):
         return int(family_named(self.family).n_numbers(self.config))
 
     def __getitem__(self, index) -> "CompactBRDF":
-        """Select materials of the batch (``model[3]``, ``model[:2]``)."""
-        if not self.batch_shape:
+        """Select materials of the batch (``model[3]``, ``model[:2]``; the channel axis is not indexed)."""
+        if not self.materials_shape:
             raise IndexError("this CompactBRDF has no batch axes")
         key = _index_key(index)
         if key is None:  # an array index
