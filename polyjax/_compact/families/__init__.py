@@ -1,20 +1,28 @@
-"""The families of compact models, by name (``FAMILIES``), each a :class:`Family`."""
+"""Compact model families: each a model of a few numbers per material, fitted in closed form or by a few
+closed-form solves, bounded and non-negative at every direction above the horizon.
 
-from __future__ import annotations
+The protocol every family follows (``FAMILIES`` maps a family's name to its instance)::
 
-from collections.abc import Hashable
-from typing import Protocol
+    class Family(Protocol):
+        name: str
+        def configs(self, budget: int) -> list[Hashable]   # static configurations with n_numbers(c) <= budget
+        def n_numbers(self, config) -> int                  # numbers stored per material, 3 channels counted
+        def fit(self, config, u, v, values, weights, mask, metric: str) -> PyTree  # values (*batch, 3, n)
+        def evaluate(self, config, params, u, v) -> Array  # (*batch, 3, n); finite, >= 0, bounded
 
-from ._dev_polynomial import DEV_POLYNOMIAL
+Families: ``basis`` (a principal-component basis of ``log(1 + f)`` learned from measured materials, shipped in
+``polyjax/_compact/data/basis.npz``; :class:`BasisFamily` takes another basis, e.g. a leave-one-out one, and says
+which materials it was learned from in ``trained_on``), ``polynomial`` (the log-link, clamped polynomial).
+"""
+
+from typing import Hashable, Protocol
+
+from .basis import BasisFamily
+from .polynomial import PolynomialFamily
 
 
 class Family(Protocol):
-    """A family of compact models: static configurations, their number of stored numbers, a fit and an evaluation.
-
-    ``fit(config, u, v, values, weights, mask, metric)`` takes RGB ``values (*batch, 3, n)`` and returns a pytree of
-    arrays with leading axes ``batch``; ``evaluate(config, params, u, v)`` returns ``(*batch, 3, n)``: finite,
-    non-negative and bounded everywhere above the horizon.
-    """
+    """A compact model family (module docstring)."""
 
     name: str
 
@@ -27,4 +35,6 @@ class Family(Protocol):
     def evaluate(self, config, params, u, v): ...
 
 
-FAMILIES: dict[str, Family] = {f.name: f for f in (DEV_POLYNOMIAL,)}
+FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily())}
+
+__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily"]
