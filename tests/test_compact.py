@@ -141,3 +141,13 @@ def test_exports_and_view_tabulate_the_compact_model(tmp_path, fitted, capsys):
     (item,) = pj.view.as_items([("c", one)], resolution=(4, 4, 8))
     assert item.kind == "table" and item.info["family"] == one.family
     assert item.info["numbers per material"] == one.n_numbers
+
+
+@pytest.mark.slow  # the cross-validation of every candidate on the full MERL grid
+def test_cli_default_on_rgb_data_is_the_compact_model_and_options_give_the_paper(capsys, data_root, tmp_path):
+    assert main(["fit", "--dataset", "merl-nbrdf:chrome", "--json", "--save", str(tmp_path / "c.npz")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["model"] == "compact" and out["budget"] == 33 and out["n_numbers"] <= 33
+    assert isinstance(pj.load_model(tmp_path / "c.npz"), pj.CompactBRDF)
+    assert main(["fit", "--dataset", "merl-nbrdf:chrome", "--variables", "lafortune", "--degree", "7", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["model"] == "polynomial"
