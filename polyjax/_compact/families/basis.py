@@ -10,7 +10,8 @@ tabulated on the folded Rusinkiewicz grid (``_grid.py``) and read by trilinear i
 direction above the horizon (the table's extremes), never negative. ``k`` coefficients per channel, ``3 k``
 numbers per material.
 
-The fit (closed form, then a few Gauss-Newton steps, each an ``(n, k)`` least-squares solve: QR, then the SVD of its triangle):
+The fit (closed form, then a few Gauss-Newton steps, each an ``(n, k)`` least-squares solve: QR, then the SVD
+of its triangle):
 
 1. ``c`` minimising ``sum w J^2 (B c - log(1 + K b))^2``, ``J = cos(theta_u) (1 + K b) / (K (1 + b cos(theta_u)))``:
    the log metric linearised in ``g``, one weighted solve;
@@ -36,8 +37,8 @@ K_TRANSFORM = 1.0
 N_COMPONENTS = 48
 #: largest ``g`` the model evaluates (``f`` at most ``(exp(G_MAX) - 1) / K``, 1e5 1/sr)
 G_MAX = float(np.log1p(K_TRANSFORM * 1e5))
-STEPS = 4
-MIX_LOG = 1.0
+STEPS = 2
+MIX_LOG = 3.0
 _DATA = Path(__file__).parents[1] / "data" / "basis.npz"
 
 
