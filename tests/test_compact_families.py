@@ -32,12 +32,14 @@ def test_configs_fit_the_budget_and_count_three_channels():
             configs = fam.configs(budget)
             assert configs and all(fam.n_numbers(c) <= budget for c in configs)
     basis, poly = COMPACT_FAMILIES["basis"], COMPACT_FAMILIES["polynomial"]
-    assert basis.configs(33)[-1] == 11 and basis.n_numbers(11) == 33
+    assert (11, -1) in basis.configs(33) and (12, -1) not in basis.configs(33) and basis.n_numbers((11, -1)) == 33
+    assert basis.n_numbers((7, 1)) == 33 and basis.n_numbers((1, 2)) == 33  # 4 and 10 polynomial terms
     assert poly.n_numbers(("rusinkiewicz", 3, True)) == 30  # 10 terms per channel
     assert ("rusinkiewicz", 4, True) not in poly.configs(33)
 
 
-@pytest.mark.parametrize("family, config", [("basis", 11), ("polynomial", ("rusinkiewicz", 3, True))])
+@pytest.mark.parametrize("family, config", [("basis", (11, -1)), ("basis", (7, 1)),
+                                            ("polynomial", ("rusinkiewicz", 3, True))])
 def test_finite_non_negative_bounded_over_the_merl_grid(merl, family, config):
     fit, u, v = merl
     fam = COMPACT_FAMILIES[family]
@@ -61,10 +63,11 @@ def test_basis_gradients_match_finite_differences():
     u, v = (jnp.asarray(x / np.linalg.norm(x, axis=-1, keepdims=True)) for x in (u, v))
     c0 = jnp.asarray(rng.normal(size=(3, 4)) * 0.1 + [[1.0, 0, 0, 0]] * 3)
 
+    @jax.jit
     def loss(c, u):
-        return jnp.sum(fam.evaluate(4, c, u, v) ** 2)
+        return jnp.sum(fam.evaluate((4, -1), c, u, v) ** 2)
 
-    g_c, g_u = jax.grad(loss, argnums=(0, 1))(c0, u)
+    g_c, g_u = jax.jit(jax.grad(loss, argnums=(0, 1)))(c0, u)
     h = 1e-6
     e = jnp.zeros_like(c0).at[1, 2].set(h)
     assert float(g_c[1, 2]) == pytest.approx(float(loss(c0 + e, u) - loss(c0 - e, u)) / (2 * h), rel=1e-5)
@@ -80,7 +83,7 @@ def test_leave_one_out_basis_excludes_the_material():
     basis, used = learn(tables, mass, names, exclude=("c",), n_components=3)
     assert used == ("a", "b", "d") and basis.shape == (3, 50)
     fam = CompactBasisFamily(basis, used)
-    assert "c" not in fam.trained_on and fam.configs(9) == [1, 2, 3]
+    assert "c" not in fam.trained_on and fam.configs(9) == [(1, -1), (2, -1), (3, -1)]
     # the first row is the mean of the other materials' transformed tables
     assert np.allclose(basis[0], np.log1p(tables[[0, 1, 3]]).reshape(-1, 50).mean(0))
     shipped = COMPACT_FAMILIES["basis"].trained_on
