@@ -202,6 +202,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--materials", type=int, default=100)
     ap.add_argument("--sizes", default=",".join(map(str, SIZES)))
+    ap.add_argument("--merl-sizes", default=None, help="sizes of the MERL table (default --sizes)")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: merl, rgl, other, time")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
@@ -209,7 +210,8 @@ def main():
     names = list(pj.data.MERL_NAMES[: args.materials])
     print(f"load average at start: {open('/proc/loadavg').read().split()[:3]}; devices {jax.devices()}", flush=True)
     t0 = time.perf_counter()
-    parts = (("merl", lambda: merl_table(names, sizes)), ("rgl", lambda: rgl_table(sizes)),
+    merl_sizes = sizes if args.merl_sizes is None else [int(s) for s in args.merl_sizes.split(",")]
+    parts = (("merl", lambda: merl_table(names, merl_sizes)), ("rgl", lambda: rgl_table(sizes)),
              ("other", lambda: other_table([s for s in sizes if s <= 33])), ("time", lambda: time_table(sizes)))
     for label, part in parts:
         if label not in skip:
