@@ -21,7 +21,10 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   per-process memo of arrays made from a grid's arguments, computed once, possibly in a background thread, as the
   MERL loader's grid), :func:`forget_memos` (every in-process memo forgotten: the state of a fresh process, for
   measuring or checking what a first call does);
-- compact models: :func:`fit_compact_family` (one family's configuration fitted, no choice: benchmarks, checks);
+- compact models: :data:`COMPACT_FAMILIES` (the families of compact models, by name: ``configs``, ``n_numbers``,
+  ``fit``, ``evaluate``), :class:`CompactBasisFamily` (the learned-basis family on a basis of one's own, e.g. one
+  learned without the material it fits), :func:`fit_compact_family` (one family's configuration fitted, no choice:
+  benchmarks, checks);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving` (a
   fitter keeping its compiled executable beside the compilation cache, as ``polyjax fit`` does).
@@ -32,6 +35,8 @@ from ._cache.compilation import cache_disabled_by_env, compile_for_saving
 from ._cache.keys import program_key, source_stamp
 from ._cache.memo import forget_all as forget_memos
 from ._cache.memo import grid_memo
+from ._compact.families import FAMILIES as COMPACT_FAMILIES
+from ._compact.families import BasisFamily as CompactBasisFamily
 from ._compact.fit import fit_compact_family
 from ._config import configured_data_root, data_file
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
@@ -52,5 +57,6 @@ __all__ = [
     "ModelKind", "PreparedInputs", "check_parameter_count", "configured_data_root", "data_file", "device_array",
     "fit_weights", "fitter_for", "is_concrete", "is_traced", "kind_named", "kind_of", "model_kinds", "module_kind",
     "one_lapack_thread", "prepare_inputs", "raise_on_status", "register_model_kind", "result_message",
-    "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo", "fit_compact_family",
+    "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo", "COMPACT_FAMILIES", "CompactBasisFamily",
+    "fit_compact_family",
 ]

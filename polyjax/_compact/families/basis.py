@@ -10,7 +10,8 @@ tabulated on the folded Rusinkiewicz grid (``_grid.py``) and read by trilinear i
 direction above the horizon (the table's extremes), never negative. ``k`` coefficients per channel, ``3 k``
 numbers per material.
 
-The fit (closed form, then a few Gauss-Newton steps, each an ``(n, k)`` least-squares solve: QR, then the SVD of its triangle):
+The fit (closed form, then a few Gauss-Newton steps, each an ``(n, k)`` least-squares solve: QR, then the SVD
+of its triangle):
 
 1. ``c`` minimising ``sum w J^2 (B c - log(1 + K b))^2``, ``J = cos(theta_u) (1 + K b) / (K (1 + b cos(theta_u)))``:
    the log metric linearised in ``g``, one weighted solve;
@@ -33,11 +34,13 @@ from . import _grid
 #: the transform's scale ``K`` in ``g = log(1 + K f)``
 K_TRANSFORM = 1.0
 #: rows of the shipped basis (the mean and the first principal components)
-N_COMPONENTS = 48
+N_COMPONENTS = 86
 #: largest ``g`` the model evaluates (``f`` at most ``(exp(G_MAX) - 1) / K``, 1e5 1/sr)
 G_MAX = float(np.log1p(K_TRANSFORM * 1e5))
-STEPS = 4
-MIX_LOG = 1.0
+STEPS = 2
+#: the degrees of the polynomial terms a configuration may add (-1: none)
+DEGREES = (-1, 1, 2, 3)
+MIX_LOG = 3.0
 _DATA = Path(__file__).parents[1] / "data" / "basis.npz"
 
 
@@ -65,23 +68,52 @@ class BasisFamily:
     def trained_on(self) -> tuple[str, ...]:
         return shipped_basis()[1] if self._trained_on is None else tuple(self._trained_on)
 
-    def configs(self, budget: int) -> list[int]:
+    def configs(self, budget: int) -> list[tuple[int, int]]:
+        """``(k, d)``: ``k`` basis rows and the terms of total degree at most ``d`` (none for ``d = -1``) of the
+        grid's coordinates, ``3 (k + terms)`` numbers at most ``budget``."""
         k_max = N_COMPONENTS if self._basis is None else int(np.shape(self._basis)[0])
-        return [k for k in range(1, min(k_max, budget // 3) + 1)]
+        return [(k, d) for d in DEGREES for k in range(1, k_max + 1) if self.n_numbers((k, d)) <= budget]
 
-    def n_numbers(self, config: int) -> int:
-        return 3 * int(config)
+    def n_numbers(self, config) -> int:
+        k, d = config
+        return 3 * (int(k) + n_terms(d))
 
     def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
-        """Coefficients ``(*batch, 3, k)`` of ``values (*batch, 3, n)`` (module docstring)."""
-        phi = _grid.sample(self.basis[:config], u, v)
+        """Coefficients ``(*batch, 3, k + terms)`` of ``values (*batch, 3, n)`` (module docstring)."""
+        phi = self.columns(config, u, v)
         mix = MIX_LOG if metric == "log" else None
         return _fit(phi, u, v, jnp.asarray(values), weights, mask, mix)
 
     def evaluate(self, config, params, u, v):
         """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
-        phi = _grid.sample(self.basis[:config], u, v)
-        return _value(jnp.einsum("nk,...k->...n", phi, params))
+        return _value(jnp.einsum("nk,...k->...n", self.columns(config, u, v), params))
+
+    def columns(self, config, u, v):
+        """``(n, k + terms)``: the basis rows read at the directions, then the Legendre terms of the coordinates."""
+        k, d = config
+        phi = _grid.sample(self.basis[:k], u, v)
+        if d < 0:
+            return phi
+        return jnp.concatenate([phi, _legendre_terms(_grid.coordinates(u, v), d)], -1)
+
+
+def n_terms(d: int) -> int:
+    """Terms of total degree at most ``d`` in three variables (0 for ``d < 0``)."""
+    return 0 if d < 0 else (d + 1) * (d + 2) * (d + 3) // 6
+
+
+def _legendre(t, d):
+    x = 2 * t - 1
+    p = [jnp.ones_like(x), x]
+    for n in range(1, d):
+        p.append(((2 * n + 1) * x * p[n] - n * p[n - 1]) / (n + 1))
+    return p[: d + 1]
+
+
+def _legendre_terms(coords, d):
+    pa, pb, pc = (_legendre(t, d) for t in coords)
+    return jnp.stack([pa[i] * pb[j] * pc[m] for i in range(d + 1) for j in range(d + 1 - i)
+                      for m in range(d + 1 - i - j)], -1)
 
 
 def _value(g):
