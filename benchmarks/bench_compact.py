@@ -10,8 +10,8 @@ Models, at budgets of 9, 16, 33, 64, 128, 256 numbers per material:
 
 - ``compact``: :func:`polyjax.fit_compact`'s rule (3-fold cross-validation on the fitting subsample, the candidate of
   least held-out log error among the candidates within the budget, refitted on all of it). The candidates, to
-  bound the compilations (one program per configuration): the basis family at ``k = budget // 3`` of every budget
-  (3, 5, 11, 21, 42, 48 coefficients per channel), the polynomial family's configurations within ``--poly-budget``
+  bound the compilations (one program per configuration): the basis family's rows alone at ``k = budget // 3`` of
+  every budget (configurations ``(k, -1)``), the polynomial family's configurations within ``--poly-budget``
   (33 by default). The
   ``basis`` family is learned leave-one-out: each material's basis is learned from the other materials
   (``benchmarks/learn_compact_basis.py``), never from the material it fits; so its candidates are cross-validated
@@ -97,7 +97,7 @@ def basis_loo(names, fit, score, max_budget):
     names_all, tables = lcb.material_tables()
     mass = lcb.node_weights()
     held = _held(fit.n_samples)
-    ks = sorted({min(lcb.N_COMPONENTS, b // 3) for b in BUDGETS if b <= max_budget})
+    ks = sorted({(min(lcb.N_COMPONENTS, b // 3), -1) for b in BUDGETS if b <= max_budget})
     cv, preds, times = [], [], []
     for i, name in enumerate(names):
         basis = jnp.asarray(lcb.learn(tables, mass, names_all, exclude=[name])[0])
@@ -154,7 +154,7 @@ def choose(tables, n_numbers, budget):
 
 
 def n_numbers(family, c):
-    return 3 * c if family == "basis" else pj.compact_families()[family].n_numbers(c)
+    return pj.compact_families()[family].n_numbers(c)
 
 
 def compact_rows(names, score, ks, bcv, bpred, pcv, ppred):
