@@ -11,6 +11,7 @@ from . import data, internal  # noqa: F401 - polyjax.internal: the API of extens
 from ._approx import ApproximationError, approximation_error
 from ._basis import design_matrix, exponents, n_terms
 from ._cache.compilation import CACHE_ENV, default_cache_dir, enable_compilation_cache
+from ._compact import BudgetError, CompactBRDF, compact_families, fit_compact
 from ._config import DATA_ENV, data_root, has_data_root
 from ._design import fitted_design
 from ._directions import (
@@ -74,12 +75,12 @@ def __dir__():
 
 
 __all__ = [
-    "approximation_error", "ApproximationError", "CACHE_ENV", "Capture", "CaptureFit",
-    "cartesian_to_spherical", "check_samples",
+    "approximation_error", "ApproximationError", "BudgetError", "CompactBRDF", "compact_families",
+    "CACHE_ENV", "Capture", "CaptureFit", "cartesian_to_spherical", "check_samples",
     "cos_theta", "cutoff_mask", "data", "DATA_ENV", "data_root", "DataFormatError", "DataNotFoundError",
     "default_cache_dir", "design_matrix", "enable_compilation_cache", "evaluate_paper_form", "explanatory_variables",
-    "exponents", "export", "fit_capture", "fit_log_polynomial", "fit_pca", "fit_polynomial",
-    "fit_polynomial_to_images", "FitError",
+    "exponents", "export", "fit_capture", "fit_compact",
+    "fit_log_polynomial", "fit_pca", "fit_polynomial", "fit_polynomial_to_images", "FitError",
     "fitted_design", "get_variables", "half_vector", "has_data_root", "image_rows", "ImageRows", "InputError",
     "inverse", "l2_error", "lapack_threads", "log_error", "load_model", "LstsqSolution", "make_measurements",
     "Measurements", "model_metadata", "n_parameters", "n_terms", "PCA", "PolyjaxError", "PolynomialBRDF",

@@ -21,6 +21,10 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   per-process memo of arrays made from a grid's arguments, computed once, possibly in a background thread, as the
   MERL loader's grid), :func:`forget_memos` (every in-process memo forgotten: the state of a fresh process, for
   measuring or checking what a first call does);
+- compact models: :data:`COMPACT_FAMILIES` (the families of compact models, by name: ``configs``, ``n_numbers``,
+  ``fit``, ``evaluate``), :class:`CompactBasisFamily` (the learned-basis family on a basis of one's own, e.g. one
+  learned without the material it fits), :func:`fit_compact_family` (one family's configuration fitted, no choice:
+  benchmarks, checks);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
   :func:`save_program`, :func:`load_program` (a fitter keeping its compiled executable beside the compilation cache,
@@ -36,6 +40,9 @@ from ._cache.keys import program_key, source_stamp
 from ._cache.memo import forget_all as forget_memos
 from ._cache.memo import grid_memo
 from ._cache.programs import load_lapack_kernels, load_program, save_program
+from ._compact.families import FAMILIES as COMPACT_FAMILIES
+from ._compact.families import BasisFamily as CompactBasisFamily
+from ._compact.fit import fit_compact_family
 from ._config import configured_data_root, data_file
 from ._files import check_output_path, make_cache_folder, write_atomically, write_bytes_atomically
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
@@ -59,4 +66,5 @@ __all__ = [
     "status_warnings",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
+    "COMPACT_FAMILIES", "CompactBasisFamily", "fit_compact_family",
 ]

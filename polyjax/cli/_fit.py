@@ -15,6 +15,7 @@ from .._fit.saved import fit_saved
 from .._io import fitter_for, kind_of
 from .._results import status_warnings
 from ._args import add_model_options, check_degrees_fit, load_dataset, spec_from_args, strict_json
+from ._fit_compact import MODEL_OPTIONS, add_compact_options, run_compact, wants_compact
 from ._progress import compile_notice, progress_line
 
 #: the model ``polyjax fit`` fits by default: Lafortune's variables, p = 7
@@ -35,6 +36,8 @@ def add_parser(sub, common) -> None:
                    "baselines.MODELS); --variables, --degree, --basis, --interactions, --link, --eps apply to the "
                    "polynomial only")
     add_model_options(f, DEFAULT_SPEC, several=True)
+    f.set_defaults(**{k: None for k in MODEL_OPTIONS})  # None: not given (the defaults follow the data, cmd_fit)
+    add_compact_options(f)
     f.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees (default 80)")
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
@@ -68,7 +71,10 @@ ZERO_MODEL_RATIO = 0.95
 
 def cmd_fit(args) -> int:
     """Run ``polyjax fit``: fit the model of ``--model`` to the dataset, optionally save it, and report every lane's
-    L2, status and coefficients (text, or one JSON object with ``--json``); returns the exit status."""
+    L2, status and coefficients (text, or one JSON object with ``--json``); returns the exit status.
+
+    With ``--budget``, or with no model option on RGB data, the compact fit instead (``_fit_compact``)."""
+    given = _fill_model_defaults(args)
     spec = spec_from_args(args, several=True)
     degrees = list(spec.degree) if isinstance(spec.degree, tuple) else [spec.degree]
     degree = degrees[0] if len(degrees) == 1 else degrees
@@ -77,6 +83,8 @@ def cmd_fit(args) -> int:
     if args.save:
         check_model_file(args.save, "--save")
     data, synthetic = load_dataset(args)
+    if wants_compact(args, data, given):
+        return run_compact(args, data)
     if polynomial:
         check_degrees_fit(data, spec.variables, degrees, spec.interactions, args.cutoff, "--degree")
     model, l2, zero, elapsed = _run_fit(args, data, kind, model_name, spec)
@@ -90,6 +98,16 @@ def cmd_fit(args) -> int:
         print(f"NOTE: no data root (neither --data-root nor {pj.DATA_ENV} given): using the {data.source}")
     _print_fit(args, out, model, beta)
     return 0
+
+
+def _fill_model_defaults(args) -> list[str]:
+    """The model options given on the command line (their destinations); the others set to :data:`DEFAULT_SPEC`."""
+    given = [k for k in MODEL_OPTIONS if getattr(args, k) is not None]
+    defaults = DEFAULT_SPEC.to_dict()
+    for k in MODEL_OPTIONS:
+        if getattr(args, k) is None:
+            setattr(args, k, str(defaults[k]) if k == "degree" else defaults[k])
+    return given
 
 
 def _run_fit(args, data, kind, model_name, spec):

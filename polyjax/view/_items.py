@@ -21,6 +21,7 @@ import dataclasses
 
 import numpy as np
 
+from .._compact.model import CompactBRDF
 from .._errors import InputError
 from .._measurements import Measurements
 from .._model import PolynomialBRDF
@@ -97,6 +98,13 @@ def _polynomial_info(model: PolynomialBRDF) -> dict:
     return info
 
 
+def _compact_info(model: CompactBRDF) -> dict:
+    """The family, configuration, numbers per material and held-out errors of a compact model."""
+    return {"model": "compact", "family": model.family, "config": repr(model.config),
+            "numbers per material": model.n_numbers, "L2 (held out)": _array_list(model.l2),
+            "log error (held out)": _array_list(model.log)}
+
+
 def _fit_info(model) -> dict:
     """Name, parameter names and values (one row per lane) and L2 of a fitted model with ``params`` (a
     ``baselines.BaselineFit``); the name alone when its parameters are not one numeric array."""
@@ -151,6 +159,8 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | N
                 item = ViewItem(label, "program", info, program=program(lane), model=lane)
             except InputError as e:  # variables the expression builder does not write (e.g. rusinkiewicz)
                 item = _tabulated(lane, label, resolution, info, str(e).removeprefix("model: "))
+        elif isinstance(lane, CompactBRDF):  # every family is a table here (no expression program for them yet)
+            item = _tabulated(lane, label, resolution, _compact_info(lane), "compact models are shown as tables")
         elif callable(lane):
             item = _tabulated(lane, label, resolution)
         else:

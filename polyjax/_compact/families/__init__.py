@@ -1,0 +1,47 @@
+"""Compact model families: each a model of a few numbers per material, fitted in closed form or by a few
+closed-form solves, bounded and non-negative at every direction above the horizon.
+
+The protocol every family follows (``FAMILIES`` maps a family's name to its instance)::
+
+    class Family(Protocol):
+        name: str
+        def configs(self, budget: int) -> list[Hashable]   # static configurations with n_numbers(c) <= budget
+        def n_numbers(self, config) -> int                  # numbers stored per material, 3 channels counted
+        def fit(self, config, u, v, values, weights, mask, metric: str) -> PyTree  # values (*batch, 3, n)
+        def evaluate(self, config, params, u, v) -> Array  # (*batch, 3, n); finite, >= 0, bounded
+
+Families: ``basis`` (a principal-component basis of ``log(1 + f)`` learned from measured materials, shipped in
+``polyjax/_compact/data/basis.npz``; configurations ``(k, d)``: ``k`` basis rows and the Legendre terms of total
+degree ``d`` of the grid's coordinates, ``d = -1`` for none; :class:`BasisFamily` takes another basis, e.g. a
+leave-one-out one, and says which materials it was learned from in ``trained_on``), ``polynomial`` (the log-link,
+clamped polynomial; configurations ``(variables, degree, interactions)``, the fitted
+:class:`polyjax.PolynomialBRDF` as parameters).
+
+No deviation from the protocol above. ``metric`` is ``"log"`` (the default: the basis fit weighs the log metric and,
+by ``basis.MIX_LOG``, equation (11)'s L2) or ``"l2"`` (the L2 alone). The fits are not jitted as a whole here (the
+basis fit's solves are); a caller jits ``fit`` with ``config`` static.
+"""
+
+from typing import Hashable, Protocol
+
+from .basis import BasisFamily
+from .polynomial import PolynomialFamily
+
+
+class Family(Protocol):
+    """A compact model family (module docstring)."""
+
+    name: str
+
+    def configs(self, budget: int) -> list[Hashable]: ...
+
+    def n_numbers(self, config) -> int: ...
+
+    def fit(self, config, u, v, values, weights, mask, metric: str): ...
+
+    def evaluate(self, config, params, u, v): ...
+
+
+FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily())}
+
+__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily"]

@@ -1,0 +1,109 @@
+r"""The front door of compact fits: :func:`fit_compact`, the most accurate model of at most ``N`` numbers."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import InputError, UnknownNameError
+from .._measurements import Measurements
+from .families import FAMILIES
+from .model import CompactBRDF, family_named
+from .select import candidates, choose, refit
+
+METRICS = ("log", "l2")
+#: the default budget of numbers per material (the size of the published SGD fits)
+DEFAULT_BUDGET = 33
+
+
+class BudgetError(InputError):
+    """The budget of numbers per material admits no configuration of any family asked for."""
+
+
+def _check(data, budget, metric, families, folds) -> tuple[str, ...]:
+    """The argument checks of :func:`fit_compact`, before any work; the families' names."""
+    if not isinstance(data, Measurements):
+        raise InputError(f"data: expected a polyjax.Measurements of RGB values (*batch, 3, n), found "
+                         f"{type(data).__name__}")
+    if data.values.ndim < 2 or data.values.shape[-2] != 3:
+        raise InputError(f"data.values: expected RGB values of shape (*batch, 3, n), found {data.values.shape}")
+    if data.u.ndim != 2 or data.v.ndim != 2:
+        raise InputError(f"data.u, data.v: expected directions (n, 3) shared by every material, found "
+                         f"{data.u.shape} and {data.v.shape}")
+    if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) or budget < 1:
+        raise InputError(f"budget: expected a positive number of numbers per material, found {budget!r}")
+    if metric not in METRICS:
+        raise InputError(f"metric: expected one of {METRICS}, found {metric!r}")
+    names = tuple(FAMILIES) if families is None else ((families,) if isinstance(families, str) else tuple(families))
+    for name in names:
+        if name not in FAMILIES:
+            raise UnknownNameError(f"families: {name!r} is not a family (known: {sorted(FAMILIES)})")
+    if not names:
+        raise InputError("families: expected at least one family name")
+    if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or not 2 <= folds <= data.n_samples:
+        raise InputError(f"folds: expected an integer from 2 to the number of samples ({data.n_samples}), "
+                         f"found {folds!r}")
+    return names
+
+
+def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str = "log", families=None,
+                folds: int = 3) -> CompactBRDF:
+    r"""The most accurate compact model of at most ``budget`` numbers per material, chosen by cross-validation.
+
+    Every configuration of every family (``polyjax/_compact/families``) that stores at most ``budget`` numbers per
+    material (all three channels counted) is fitted on ``folds - 1`` folds of the samples and scored on the
+    held-out fold (``polyjax/_compact/select.py``); the candidate of least held-out error in ``metric`` is refitted
+    on every sample. The choice follows one rule for every material; a batch of materials shares one choice (fit
+    materials one at a time for a choice of their own).
+
+    Args:
+        data: :class:`polyjax.Measurements` of RGB values ``(*batch, 3, n)``, directions ``(n, 3)``.
+        budget: the most numbers stored per material (33, the size of the published SGD fits, by default).
+        metric: ``"log"`` (the log metric of :func:`polyjax.log_error`, every bin above the horizon) or ``"l2"``
+            (equation (11), 80-degree cutoff): what the fits minimise and the choice compares.
+        families: a family name or names to choose among (every registered family when None).
+        folds: the number of cross-validation folds (at least 2).
+
+    Returns:
+        A :class:`polyjax.CompactBRDF` of batch shape ``*batch``, with its held-out errors ``.l2`` and ``.log``.
+
+    Raises:
+        InputError: data that is not RGB ``Measurements``, a budget, metric or folds out of range.
+        BudgetError: no configuration of the families asked for fits within ``budget`` (names the smallest).
+        UnknownNameError: a family name that is not registered.
+    """
+    names = _check(data, budget, metric, families, folds)
+    cands = candidates(names, int(budget))
+    if not cands:
+        smallest = {n: min((family_named(n).n_numbers(c) for c in family_named(n).configs(10 ** 9)), default=None)
+                    for n in names}
+        raise BudgetError(f"budget: {budget} numbers per material admits no model of the families {list(names)} "
+                          f"(the smallest need {smallest})")
+    u, v = jnp.asarray(data.u), jnp.asarray(data.v)
+    values = jnp.asarray(data.values)
+    mask = jnp.asarray(data.mask)
+    if mask.ndim == values.ndim - 1:  # one mask per material: the same for its channels
+        mask = mask[..., None, :]
+    weights = jnp.asarray(data.weights)
+    (family, config), (l2, lg) = choose(cands, metric, u, v, values, weights, mask, int(folds))
+    params = refit(family, config, metric, u, v, values, weights, mask)
+    return CompactBRDF(params=params, l2=l2, log=lg, family=family, config=config)
+
+
+def compact_families() -> dict:
+    """The registered families of compact models, by name (each has ``configs(budget)``, ``n_numbers(config)``,
+    ``fit`` and ``evaluate``: ``polyjax/_compact/families/__init__.py``)."""
+    return dict(FAMILIES)
+
+
+def fit_compact_family(data: Measurements, family: str, config, *, metric: str = "log") -> CompactBRDF:
+    """One family's configuration fitted on every sample of ``data``, no choice (``l2``/``log`` NaN): the
+    benchmarks' and tests' way to a given model."""
+    _check(data, family_named(family).n_numbers(config), metric, family, 2)
+    mask = jnp.asarray(data.mask)
+    if mask.ndim == data.values.ndim - 1:
+        mask = mask[..., None, :]
+    params = refit(family, config, metric, jnp.asarray(data.u), jnp.asarray(data.v), jnp.asarray(data.values),
+                   jnp.asarray(data.weights), mask)
+    nan = jnp.full(data.values.shape[:-2], jnp.nan)
+    return CompactBRDF(params=params, l2=nan, log=nan, family=family, config=config)

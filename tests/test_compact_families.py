@@ -1,0 +1,90 @@
+"""The compact model families (polyjax/_compact/families): sizes, bounds over the MERL grid, derivatives, and the
+leave-one-out basis of the benchmark."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import polyjax as pj
+from benchmarks.learn_compact_basis import learn
+from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily
+
+MATERIALS = ("chrome", "white-paint")
+
+
+@pytest.fixture(scope="module")
+def merl():
+    fit = pj.data.load_merl_nbrdf(list(MATERIALS), subsample=3000, seed=11)
+    # every direction pair of a coarse MERL grid (both above the horizon), and near-grazing pairs
+    u, v, _, above = pj.data.merl_grid((30, 30, 60))
+    rng = np.random.default_rng(0)
+    t = np.deg2rad(rng.uniform(85.0, 89.999, (2000, 2)))
+    p = rng.uniform(0.0, 2 * np.pi, (2000, 2))
+    graze = [np.stack([np.sin(t[:, i]) * np.cos(p[:, i]), np.sin(t[:, i]) * np.sin(p[:, i]), np.cos(t[:, i])], -1)
+             for i in (0, 1)]
+    return fit, np.concatenate([u[above], graze[0]]), np.concatenate([v[above], graze[1]])
+
+
+def test_configs_fit_the_budget_and_count_three_channels():
+    for fam in COMPACT_FAMILIES.values():
+        for budget in (9, 16, 33):
+            configs = fam.configs(budget)
+            assert configs and all(fam.n_numbers(c) <= budget for c in configs)
+    basis, poly = COMPACT_FAMILIES["basis"], COMPACT_FAMILIES["polynomial"]
+    assert (11, -1) in basis.configs(33) and (12, -1) not in basis.configs(33) and basis.n_numbers((11, -1)) == 33
+    assert basis.n_numbers((7, 1)) == 33 and basis.n_numbers((1, 2)) == 33  # 4 and 10 polynomial terms
+    assert poly.n_numbers(("rusinkiewicz", 3, True)) == 30  # 10 terms per channel
+    assert ("rusinkiewicz", 4, True) not in poly.configs(33)
+
+
+@pytest.mark.parametrize("family, config", [("basis", (11, -1)), ("basis", (7, 1)),
+                                            ("polynomial", ("rusinkiewicz", 3, True))])
+def test_finite_non_negative_bounded_over_the_merl_grid(merl, family, config):
+    fit, u, v = merl
+    fam = COMPACT_FAMILIES[family]
+    params = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+    y = np.asarray(fam.evaluate(config, params, jnp.asarray(u), jnp.asarray(v)))
+    assert y.shape == (len(MATERIALS), 3, u.shape[0])
+    assert np.all(np.isfinite(y)) and np.all(y >= 0)
+    # bounded: no grazing blow-up far past the measured range of each material
+    top = np.asarray(jnp.max(fit.values, axis=(-2, -1)))
+    assert np.all(y.max(axis=(-2, -1)) <= 20 * top), (y.max(axis=(-2, -1)), top)
+    own = np.asarray(fam.evaluate(config, params, fit.u, fit.v))
+    err = np.sqrt(np.mean(np.asarray(pj.log_error(fit.values, own, fit.u, fit.v, fit.weights)) ** 2, -1))
+    assert np.all(err < 0.2), err  # a fit, not just a bounded function
+
+
+def test_basis_gradients_match_finite_differences():
+    fam = COMPACT_FAMILIES["basis"]
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(6, 3)) * [0.4, 0.4, 0.1] + [0, 0, 1]
+    v = rng.normal(size=(6, 3)) * [0.4, 0.4, 0.1] + [0, 0, 1]
+    u, v = (jnp.asarray(x / np.linalg.norm(x, axis=-1, keepdims=True)) for x in (u, v))
+    c0 = jnp.asarray(rng.normal(size=(3, 4)) * 0.1 + [[1.0, 0, 0, 0]] * 3)
+
+    @jax.jit
+    def loss(c, u):
+        return jnp.sum(fam.evaluate((4, -1), c, u, v) ** 2)
+
+    g_c, g_u = jax.jit(jax.grad(loss, argnums=(0, 1)))(c0, u)
+    h = 1e-6
+    e = jnp.zeros_like(c0).at[1, 2].set(h)
+    assert float(g_c[1, 2]) == pytest.approx(float(loss(c0 + e, u) - loss(c0 - e, u)) / (2 * h), rel=1e-5)
+    e = jnp.zeros_like(u).at[2, 0].set(h)
+    assert float(g_u[2, 0]) == pytest.approx(float(loss(c0, u + e) - loss(c0, u - e)) / (2 * h), rel=1e-4)
+
+
+def test_leave_one_out_basis_excludes_the_material():
+    rng = np.random.default_rng(2)
+    names = ("a", "b", "c", "d")
+    tables = rng.uniform(0.0, 2.0, (4, 3, 50))
+    mass = np.full(50, 1 / 50)
+    basis, used = learn(tables, mass, names, exclude=("c",), n_components=3)
+    assert used == ("a", "b", "d") and basis.shape == (3, 50)
+    fam = CompactBasisFamily(basis, used)
+    assert "c" not in fam.trained_on and fam.configs(9) == [(1, -1), (2, -1), (3, -1)]
+    # the first row is the mean of the other materials' transformed tables
+    assert np.allclose(basis[0], np.log1p(tables[[0, 1, 3]]).reshape(-1, 50).mean(0))
+    shipped = COMPACT_FAMILIES["basis"].trained_on
+    assert len(shipped) == 100 and set(shipped) == set(pj.data.MERL_NAMES)
