@@ -8,6 +8,7 @@ sets, subprocesses of the command line and several processes at once. ``tests/co
 # ruff: noqa: E501 - one test id a line, however long, so that the list reads as the suite names them
 
 SLOW_TESTS = frozenset({
+    "test_compact.py::test_no_blow_up_on_the_merl_grid",  # 21-28 s
     "test_baselines.py::test_curet_no_worse_than_scipy_and_backends_agree",  # 12 s
     "test_baselines.py::test_noise_free_data_fitted_back[ashikhmin-shirley]",  # 7 s
     "test_baselines.py::test_noise_free_data_fitted_back[blinn-phong]",  # 5 s
