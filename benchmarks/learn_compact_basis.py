@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import polyjax as pj  # noqa: E402
 from polyjax._compact.families import _grid  # noqa: E402
 from polyjax._compact.families.basis import K_TRANSFORM, N_COMPONENTS  # noqa: E402
-from polyjax.export._material import write_atomically  # noqa: E402
+from polyjax.internal import write_atomically  # noqa: E402
 
 _EDGE = 0.02  # the smaller cosine of a node moved back above the horizon
 
