@@ -36,15 +36,22 @@ def check_output_path(path: str | os.PathLike, name: str) -> Path:
     Raises:
         InputError: naming ``name``, the path and the reason.
     """
-    p = Path(path).expanduser()
-    parent = p.parent if str(p.parent) else Path(".")
-    if p.is_dir():
-        raise InputError(f"{name} {str(p)!r}: expected a file name, found a folder")
-    if not parent.is_dir():
-        raise InputError(f"{name} {str(p)!r}: the folder {str(parent)!r} does not exist")
+    p, parent = _target(path, f"{name} ")
     if not os.access(parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise InputError(f"{name} {str(p)!r}: not writable")
     return p
+
+
+def _target(path: str | os.PathLike, label: str) -> tuple[Path, Path]:
+    """``path`` (``~`` expanded) and its folder, which must exist, ``path`` not being a folder itself; the error
+    starts with ``label``."""
+    p = Path(path).expanduser()
+    parent = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise InputError(f"{label}{str(p)!r}: expected a file name, found a folder")
+    if not parent.is_dir():
+        raise InputError(f"{label}{str(p)!r}: the folder {str(parent)!r} does not exist")
+    return p, parent
 
 
 def _umask() -> int:
@@ -108,12 +115,7 @@ def write_atomically(path: str | os.PathLike, write: Callable[[Path], object], *
         InputError: ``path`` is a folder, or its folder is missing. Anything ``write`` raises, after the temporary
         file is removed.
     """
-    path = Path(path).expanduser()
-    folder = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise InputError(f"{str(path)!r}: expected a file name, found a folder")
-    if not folder.is_dir():
-        raise InputError(f"{str(path)!r}: the folder {str(folder)!r} does not exist")
+    path, folder = _target(path, "")
     fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=folder)
     os.close(fd)
     tmp = Path(name)
@@ -150,8 +152,6 @@ def write_bytes_atomically(path: str | os.PathLike, data: bytes, *, mode: int | 
             f.write(data)
 
     return write_atomically(path, write, mode=mode)
-
-
 
 
 def write_npz_atomically(path: str | os.PathLike, **arrays) -> Path:
