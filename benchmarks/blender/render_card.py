@@ -14,11 +14,14 @@ PYTHONPATH (Blender 3.4 with the system python3.11).
 """
 
 import math
+import os
 import sys
 
 import bpy
-import numpy as np
 from mathutils import Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _polyjax_cycles import render_to, set_up_cycles  # noqa: E402
 
 args = sys.argv[sys.argv.index("--") + 1:]
 src, prefix = args[0], args[1]
@@ -41,25 +44,7 @@ cam.location = (0.0, -2.0, 0.0)  # glTF (0, 0, 2)
 cam.rotation_euler = (math.pi / 2, 0.0, 0.0)  # looking along Blender +y (glTF -z), Blender +z (glTF +y) up
 scene.collection.objects.link(cam)
 scene.camera = cam
-world = bpy.data.worlds.new("black")
-world.color = (0.0, 0.0, 0.0)
-scene.world = world
-scene.render.engine = "CYCLES"
-scene.cycles.device = "CPU"
-scene.cycles.samples = samples
-scene.cycles.use_denoising = False
-scene.cycles.use_adaptive_sampling = False
-scene.cycles.max_bounces = 0
-scene.cycles.pixel_filter_type = "BOX"
-scene.cycles.filter_width = 0.01
-scene.view_settings.view_transform = "Standard"
-scene.view_settings.look = "None"
-scene.render.resolution_x, scene.render.resolution_y = width, height
-scene.render.resolution_percentage = 100
-scene.render.film_transparent = False
-scene.render.image_settings.file_format = "OPEN_EXR"
-scene.render.image_settings.color_depth = "32"
-scene.render.image_settings.color_mode = "RGB"
+set_up_cycles(scene, samples, width, height)
 sun_data = bpy.data.lights.new("sun", type="SUN")
 sun_data.angle = 0.0
 sun = bpy.data.objects.new("sun", sun_data)
@@ -70,11 +55,4 @@ for i, (dx, dy, dz, r, g, b) in enumerate(lights):
     sun_data.color = (r / strength, g / strength, b / strength)
     towards = Vector((dx, -dz, dy)).normalized()  # glTF -> Blender
     sun.rotation_euler = towards.to_track_quat("Z", "Y").to_euler()  # the sun shines along its local -z
-    out = f"{prefix}{i}.exr"
-    scene.render.filepath = out
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(out)
-    px = np.asarray(img.pixels[:], dtype=np.float64).reshape(height, width, -1)[::-1, :, :3]
-    np.save(out + ".npy", px)
-    bpy.data.images.remove(img)
-    print("polyjax-blender: wrote", out)
+    render_to(scene, f"{prefix}{i}.exr", width, height)

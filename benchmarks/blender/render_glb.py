@@ -12,10 +12,13 @@ Cycles' point light of power ``P`` watts has radiant intensity ``P / (4 pi)`` W/
 """
 
 import math
+import os
 import sys
 
 import bpy
-import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _polyjax_cycles import render_to, set_up_cycles  # noqa: E402
 
 args = sys.argv[sys.argv.index("--") + 1:]
 src, out = args[0], args[1]
@@ -40,27 +43,6 @@ light_data.shadow_soft_size = 0.0
 light = bpy.data.objects.new("light", light_data)
 light.location = light_pos
 scene.collection.objects.link(light)
-world = bpy.data.worlds.new("black")
-world.color = (0.0, 0.0, 0.0)
-scene.world = world
-scene.render.engine = "CYCLES"
-scene.cycles.device = "CPU"
-scene.cycles.samples = samples
-scene.cycles.use_denoising = False
-scene.cycles.use_adaptive_sampling = False
-scene.cycles.max_bounces = 0
-scene.cycles.pixel_filter_type = "BOX"
-scene.cycles.filter_width = 0.01  # samples at the pixel centres, as polyjax
-scene.view_settings.view_transform = "Standard"
-scene.view_settings.look = "None"
-scene.render.resolution_x = scene.render.resolution_y = size
-scene.render.resolution_percentage = 100
-scene.render.image_settings.file_format = "OPEN_EXR"
-scene.render.image_settings.color_depth = "32"
-scene.render.image_settings.color_mode = "RGB"
-scene.render.filepath = out
-bpy.ops.render.render(write_still=True)
-img = bpy.data.images.load(out)
-px = np.asarray(img.pixels[:], dtype=np.float64).reshape(size, size, -1)[::-1, :, :3]
-np.save(out + ".npy", px)
-print("polyjax-blender: wrote", out)
+set_up_cycles(scene, samples, size, size)
+render_to(scene, out, size, size)
+
