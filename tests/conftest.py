@@ -207,3 +207,9 @@ def data_root():
     from polyjax import data_root as _root
 
     return _root()
+
+
+@pytest.fixture()
+def no_data(monkeypatch):
+    """The data root unset: the command line falls back on its synthetic default."""
+    monkeypatch.delenv(DATA_ENV, raising=False)

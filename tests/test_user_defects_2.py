@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _cli_problems import one_error_line
 
 import baselines as bl
 import polyjax as pj
@@ -32,36 +33,22 @@ def saved_fits(tmp_path_factory, problem):
     return pj.save_model(folder / "poly.npz", poly), pj.save_model(folder / "ward.json", ward), ward, poly
 
 
-@pytest.fixture()
-def no_data(monkeypatch):
-    monkeypatch.delenv(pj.DATA_ENV, raising=False)
-
-
-def _one_error_line(capsys, *words):
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("polyjax: error:"), err
-    for w in words:
-        assert w in lines[0], (w, lines[0])
-    return lines[0]
-
-
 # ---------------------------------------------------------------- 3: output paths checked before any work, one rule
 def test_export_out_in_missing_folder_is_refused_before_reading_the_model(capsys, tmp_path):
     missing_model = tmp_path / "not_read.npz"  # never read: the output path is checked first
     assert main(["export", str(missing_model), "--to", "glsl", "--out", str(tmp_path / "nonexistent" / "x.glsl")]) == 2
-    _one_error_line(capsys, "--out", "nonexistent")
+    one_error_line(capsys, "--out", "nonexistent")
 
 
 def test_fit_images_save_in_missing_folder_is_refused_before_the_scene_is_read(capsys, tmp_path):
     assert main(["fit-images", str(tmp_path / "no_scene.json"), "--save", str(tmp_path / "nonexistent" / "x.npz")]) == 2
-    _one_error_line(capsys, "--save", "nonexistent")
+    one_error_line(capsys, "--save", "nonexistent")
 
 
 def test_svbrdf_out_with_missing_parent_is_refused_not_created(capsys, tmp_path):
     target = tmp_path / "nonexistent" / "dir"
     assert main(["svbrdf", "--size", "2", "--lights", "8", "--out", str(target)]) == 2
-    _one_error_line(capsys, "--out", "nonexistent")
+    one_error_line(capsys, "--out", "nonexistent")
     assert not (tmp_path / "nonexistent").exists()
 
 
@@ -72,18 +59,18 @@ def test_truncated_npz_model_is_a_data_format_error_naming_the_file(capsys, tmp_
     with pytest.raises(pj.DataFormatError, match="cut.npz"):
         pj.load_model(cut)
     assert main(["export", str(cut), "--to", "glsl", "--out", str(tmp_path / "x.glsl")]) == 2
-    _one_error_line(capsys, "cut.npz")
+    one_error_line(capsys, "cut.npz")
 
 
 # ---------------------------------------------------------------- 5: absurd degree refused at once
 def test_fit_degree_500_is_refused_before_the_fit(capsys, no_data):
     assert main(["fit", "--degree", "500"]) == 2  # 1001 parameters, 302 samples used (synthetic set)
-    _one_error_line(capsys, "--degree 500", "1001 parameters", "302 samples used")
+    one_error_line(capsys, "--degree 500", "1001 parameters", "302 samples used")
 
 
 def test_render_degrees_500_is_refused_before_the_fit(capsys, no_data, tmp_path):
     assert main(["render", "--degrees", "3,500", "--size", "4", "--out", str(tmp_path / "r")]) == 2
-    _one_error_line(capsys, "--degrees 500")
+    one_error_line(capsys, "--degrees 500")
 
 
 def test_fit_polynomial_degree_500_on_205_samples_is_refused_in_the_api(problem):
@@ -112,7 +99,7 @@ def test_save_model_with_foreign_suffix_is_refused_not_renamed(tmp_path, saved_f
 
 def test_fit_save_with_foreign_suffix_is_refused_before_the_fit(capsys, no_data, tmp_path):
     assert main(["fit", "--degree", "2", "--save", str(tmp_path / "m.txt")]) == 2
-    _one_error_line(capsys, "--save", ".npz or .json")
+    one_error_line(capsys, "--save", ".npz or .json")
     assert not list(tmp_path.iterdir())
 
 
@@ -157,7 +144,7 @@ def test_export_index_selects_degree_then_material(capsys, tmp_path, saved_fits)
     assert main(["export", str(src), "--to", "glsl", "--index", "1", "--index", "0", "--out", str(b)]) == 0
     assert a.read_text() == b.read_text() == pj.export.glsl(pj.load_model(src)[1, 0])
     assert main(["export", str(src), "--to", "glsl", "--index", "1", "--out", str(a)]) == 2
-    line = _one_error_line(capsys, "--index")
+    line = one_error_line(capsys, "--index")
     assert "model[i]" not in line
 
 
@@ -242,13 +229,13 @@ def test_fit_link_log_on_the_command_line_is_the_api_log_fit(capsys, no_data):
 # ---------------------------------------------------------------- 13: svbrdf arguments
 def test_svbrdf_degree_beyond_the_samples_of_a_texel_is_refused_at_once(capsys, tmp_path):
     assert main(["svbrdf", "--size", "8", "--degree", "9", "--lights", "8", "--out", str(tmp_path / "t")]) == 2
-    _one_error_line(capsys, "--degree 9", "19 parameters", "--lights 8")
+    one_error_line(capsys, "--degree 9", "19 parameters", "--lights 8")
     assert not (tmp_path / "t").exists()
 
 
 def test_svbrdf_zero_lights_names_the_flag(capsys, tmp_path):
     assert main(["svbrdf", "--lights", "0", "--out", str(tmp_path / "t")]) == 2
-    line = _one_error_line(capsys, "--lights")
+    line = one_error_line(capsys, "--lights")
     assert " k" not in line.split("error:")[1]
 
 
@@ -350,7 +337,7 @@ def test_fit_images_example_is_written_and_fits(capsys, tmp_path):
     spec["camera"]["fov_deg"] = "wide"
     (folder / "scene.json").write_text(json.dumps(spec))
     assert main(["fit-images", str(folder / "scene.json")]) == 2
-    _one_error_line(capsys, "camera.fov_deg", "expected a number", "'wide'")
+    one_error_line(capsys, "camera.fov_deg", "expected a number", "'wide'")
 
 
 # ---------------------------------------------------------------- 17: cache info|clear, a size cap (the progress line:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _cli_problems import one_error_line
 from _standard_problems import grey_fit
 
 import baselines as bl
@@ -20,20 +21,6 @@ from polyjax.cli import main
 
 from _problems import random_hemisphere
 from _rgl_problems import rgl_fields, write_tensor_file
-
-
-@pytest.fixture()
-def no_data(monkeypatch):
-    monkeypatch.delenv(pj.DATA_ENV, raising=False)
-
-
-def _one_error_line(capsys, *words):
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("polyjax: error:"), err
-    for w in words:
-        assert w in lines[0], (w, lines[0])
-    return lines[0]
 
 
 # ---------------------------------------------------------------- 6: aliases of one flag, one line per parse error
@@ -54,7 +41,7 @@ def test_every_parse_error_is_one_line(capsys, argv, words):
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
-    _one_error_line(capsys, *words)
+    one_error_line(capsys, *words)
 
 
 # ---------------------------------------------------------------- 8: the paper's 52 isotropic samples by name
@@ -154,7 +141,7 @@ def test_export_subsample_default_is_stated_and_checked_before_any_work(capsys, 
     assert "default 20000 of a data set on the MERL grid" in text and "'all'" in text
     assert main(["export", f"rgl:{half_bsdf}", "--to", "usd", "--subsample", "12",
                  "--out", str(tmp_path / "x.usda")]) == 2
-    _one_error_line(capsys, "--subsample", "'all'")
+    one_error_line(capsys, "--subsample", "'all'")
     assert list(tmp_path.iterdir()) == []
 
 
