@@ -24,7 +24,10 @@ In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
 
 import gc
+import json
 import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -213,3 +216,35 @@ def data_root():
 def no_data(monkeypatch):
     """The data root unset: the command line falls back on its synthetic default."""
     monkeypatch.delenv(DATA_ENV, raising=False)
+
+
+_VALIDATE_JS = """
+const path = require("path"), fs = require("fs");
+const validator = require(path.join(process.argv[2], "gltf-validator"));
+const file = process.argv[3];
+validator.validateBytes(new Uint8Array(fs.readFileSync(file)),
+                        {uri: path.basename(file), format: file.endsWith(".glb") ? "glb" : "gltf"})
+  .then((r) => console.log(JSON.stringify(r.issues)))
+  .catch((e) => { console.error(String(e)); process.exit(1); });
+"""
+
+
+@pytest.fixture(scope="session")
+def validator(tmp_path_factory):
+    """Khronos' glTF validator (npm ``gltf-validator`` in ``$POLYJAX_NODE_MODULES``, else ``.ci/node``): a function
+    of a ``.gltf``/``.glb`` path giving the issues report (a dict); missing, a skip (a failure in CI)."""
+    modules = Path(os.environ.get("POLYJAX_NODE_MODULES", Path(__file__).resolve().parents[1] / ".ci" / "node"
+                                  / "node_modules"))
+    if shutil.which("node") is None or not (modules / "gltf-validator").is_dir():
+        message = f"node or the npm package gltf-validator in {modules} (POLYJAX_NODE_MODULES) is missing"
+        (pytest.fail if os.environ.get("CI") else pytest.skip)(message)
+    script = tmp_path_factory.mktemp("node") / "validate.js"
+    script.write_text(_VALIDATE_JS)
+
+    def run(path):
+        out = subprocess.run(["node", str(script), str(modules), str(path)], capture_output=True, text=True,
+                             timeout=120)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout)
+
+    return run

@@ -1,6 +1,6 @@
 """A capture fit's textures: the tangent-space normal map (PNG 8/16-bit, EXR) round trip, the GGX fit of a lobe,
-the glTF metallic-roughness maps, and the ``.glb`` card checked by the Khronos ``gltf-validator`` (found as in
-``tests/test_export_standard.py``: the ``node_modules`` folder named by ``POLYJAX_NODE_MODULES``).
+the glTF metallic-roughness maps, and the ``.glb`` card checked by the Khronos ``gltf-validator`` (the fixture
+``validator`` of ``tests/conftest.py``).
 
 The capture fit is made here to the contract of ``polyjax.CaptureFit`` (normals, mask, per-pixel diffuse albedo,
 mix weights of ``K`` shared lobes, ``lobes(u, v) -> (K, n, 3)``): a hemisphere's normals and two GGX lobes."""
@@ -25,15 +25,6 @@ from polyjax.cli import main
 from polyjax.internal import module_kind, register_model_kind
 
 ROOT = Path(__file__).resolve().parents[1]
-NODE_MODULES = Path(os.environ.get("POLYJAX_NODE_MODULES", ROOT / ".ci" / "node" / "node_modules"))
-_VALIDATE_JS = """
-const path = require("path"), fs = require("fs");
-const validator = require(path.join(process.argv[2], "gltf-validator"));
-const file = process.argv[3];
-validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {uri: path.basename(file), format: "glb"})
-  .then((r) => console.log(JSON.stringify(r.issues)))
-  .catch((e) => { console.error(String(e)); process.exit(1); });
-"""
 ROUGHNESS, AMPLITUDE, OFFSET = (0.3, 0.65), ((0.9, 0.6, 0.3), (0.01, 0.01, 0.01)), ((0.0, 0.0, 0.0), (-0.05, 0.0, 0.05))
 
 
@@ -135,23 +126,6 @@ def test_card_maps_a_metal_and_a_dielectric():
     assert np.allclose(np.asarray(maps.roughness)[plastic], ROUGHNESS[1], atol=2e-3)
     with pytest.raises(pj.InputError, match="capture fit"):
         pj.export.card_maps(object())
-
-
-@pytest.fixture(scope="module")
-def validator(tmp_path_factory):
-    if shutil.which("node") is None or not (NODE_MODULES / "gltf-validator").is_dir():
-        message = f"node or the npm package gltf-validator in {NODE_MODULES} (POLYJAX_NODE_MODULES) is missing"
-        (pytest.fail if os.environ.get("CI") else pytest.skip)(message)
-    script = tmp_path_factory.mktemp("node") / "validate.js"
-    script.write_text(_VALIDATE_JS)
-
-    def run(path):
-        out = subprocess.run(["node", str(script), str(NODE_MODULES), str(path)], capture_output=True, text=True,
-                             timeout=120)
-        assert out.returncode == 0, out.stderr
-        return json.loads(out.stdout)
-
-    return run
 
 
 def _glb_json(path: Path) -> dict:

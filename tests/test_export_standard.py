@@ -5,10 +5,7 @@ The validator is the npm package ``gltf-validator``, found in the ``node_modules
 ``POLYJAX_NODE_MODULES`` (default: ``.ci/node/node_modules`` of the repository, where CI installs it)."""
 
 import json
-import os
-import shutil
 import struct
-import subprocess
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -20,21 +17,11 @@ import polyjax as pj
 import polyjax.render as pr
 
 ROOT = Path(__file__).resolve().parents[1]
-NODE_MODULES = Path(os.environ.get("POLYJAX_NODE_MODULES", ROOT / ".ci" / "node" / "node_modules"))
 COLOURS = [0.2, 0.5, 0.8]
 GLTF = {"model": "gltf-pbr", "baseColorFactor": COLOURS, "metallicFactor": 0.3, "roughnessFactor": 0.4}
 SPECULAR = dict(GLTF, model="gltf-pbr-specular", specularFactor=0.7, specularColorFactor=[1.0, 1.0, 1.0], ior=1.6)
 ANISOTROPIC = dict(GLTF, model="gltf-pbr-anisotropic", anisotropyStrength=0.5, anisotropyRotation=0.7)
 
-_VALIDATE_JS = """
-const path = require("path"), fs = require("fs");
-const validator = require(path.join(process.argv[2], "gltf-validator"));
-const file = process.argv[3];
-validator.validateBytes(new Uint8Array(fs.readFileSync(file)),
-                        {uri: path.basename(file), format: file.endsWith(".glb") ? "glb" : "gltf"})
-  .then((r) => console.log(JSON.stringify(r.issues)))
-  .catch((e) => { console.error(String(e)); process.exit(1); });
-"""
 
 
 def _fit_of(name, params):
@@ -44,25 +31,6 @@ def _fit_of(name, params):
     return bl.BaselineFit(params=p, raw=p, l2=jnp.zeros(3), status=z, steps=z, success=z == 0,
                           start_l2=jnp.zeros((3, 1)), start_status=z[:, None], best_start=z,
                           at_limit=jnp.zeros(p.shape, bool), name=name)
-
-
-@pytest.fixture(scope="module")
-def validator(tmp_path_factory):
-    if shutil.which("node") is None or not (NODE_MODULES / "gltf-validator").is_dir():
-        message = f"node or the npm package gltf-validator in {NODE_MODULES} (POLYJAX_NODE_MODULES) is missing"
-        if os.environ.get("CI"):
-            pytest.fail(message)
-        pytest.skip(message)
-    script = tmp_path_factory.mktemp("node") / "validate.js"
-    script.write_text(_VALIDATE_JS)
-
-    def run(path):
-        out = subprocess.run(["node", str(script), str(NODE_MODULES), str(path)], capture_output=True, text=True,
-                             timeout=120)
-        assert out.returncode == 0, out.stderr
-        return json.loads(out.stdout)
-
-    return run
 
 
 def _read_gltf(path: Path) -> dict:
