@@ -7,7 +7,8 @@ garbage collector over the whole heap several times. With JAX imported that heap
 process"); nothing in it writes anything a command made. :func:`end_process` does what must be done and skips the
 rest: it flushes ``sys.stdout`` and ``sys.stderr``, runs the exit handlers (:func:`atexit._run_exitfuncs`:
 ``logging.shutdown``, JAX's clean-up of its backends, ``weakref.finalize``'s pending finalizers, whatever the
-process registered), flushes again and ends with :func:`os._exit`.
+process registered), flushes again, flushes the C library's own stream buffers (``fflush(NULL)``: what a native
+library printed, which :func:`os._exit` would otherwise drop) and ends with :func:`os._exit`.
 
 It falls back to the ordinary exit (returns, so the caller's ``sys.exit`` runs) when the streams cannot be flushed
 (a closed pipe: Python's own exit reports it), when a non-daemon thread is still alive (Python would wait for it),
@@ -18,6 +19,7 @@ into place by the atomic writer before the command returns (``polyjax/_files/ato
 from __future__ import annotations
 
 import atexit
+import ctypes
 import os
 import sys
 import threading
@@ -38,6 +40,15 @@ def _flushed() -> bool:
     return True
 
 
+def _flush_c_streams() -> bool:
+    """``fflush(NULL)`` of the C library (every C ``FILE`` stream of the process); False where it cannot be called
+    or fails."""
+    try:
+        return ctypes.CDLL(None).fflush(None) == 0
+    except (OSError, AttributeError, TypeError):
+        return False
+
+
 def can_end_now() -> bool:
     """True when :func:`end_process` would end the process here: allowed by :data:`ENV`, no non-daemon thread
     alive besides the main thread, and this Python's ``atexit`` able to run its handlers."""
@@ -56,6 +67,6 @@ def end_process(status: int) -> int:
     if not can_end_now() or not _flushed():
         return status
     atexit._run_exitfuncs()
-    if not _flushed():  # a handler wrote to a stream that has since closed: an ordinary exit reports it
+    if not _flushed() or not _flush_c_streams():  # a stream that has since closed: the ordinary exit reports it
         return status
     os._exit(status)
