@@ -111,9 +111,14 @@ def register_model_kind(kind: ModelKind) -> ModelKind:
     return kind
 
 
-def _load_entry_points() -> None:
-    """Load every entry point of the group not loaded yet (each registers the kind it names)."""
+def _load_entry_points(until=None) -> None:
+    """Load every entry point of the group not loaded yet (each registers the kind it names), in the group's order;
+    with ``until`` (a test of the registry), stop as soon as it holds: the others stay unloaded until needed (each
+    imports its provider: ``polyjax.CaptureFit``'s imports ``polyjax.inverse`` and the renderer, which a baseline's
+    fit never uses)."""
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if until is not None and until():
+            return
         key = f"{ep.name}={ep.value}"
         if key in _LOADED_ENTRY_POINTS:
             continue
@@ -194,11 +199,21 @@ def kind_of(model) -> ModelKind:
 def fitter_for(name: str) -> tuple[ModelKind, str]:
     """The kind whose ``models`` include ``name`` (case, ``_`` and space insensitive), and the name as it spells it."""
     key = str(name).strip().lower().replace("_", "-").replace(" ", "-")
+
+    def found():
+        for k in list(_REGISTRY.values()):
+            for m in k.models:
+                if m.lower() == key and k.fit is not None:
+                    return k, m
+        return None
+
+    # the kinds registered so far first, then the entry points one at a time until one provides the name (the first
+    # in registration order, as when every one is loaded first)
+    _load_entry_points(until=found)
+    hit = found()
+    if hit is not None:
+        return hit
     kinds = model_kinds()
-    for k in kinds.values():
-        for m in k.models:
-            if m.lower() == key and k.fit is not None:
-                return k, m
     known = sorted(m for k in kinds.values() if k.fit is not None for m in k.models)
     failed = "".join(f"; {kind} unavailable: {why}" for kind, why in _LOAD_FAILURES.items())
     raise UnknownNameError(f"--model {name!r}: expected 'polynomial' or one of {known}{failed}")

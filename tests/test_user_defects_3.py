@@ -192,3 +192,69 @@ def test_ctrl_c_during_a_long_export_stops_within_two_seconds_with_one_line(tmp_
     assert err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err, err
     assert seconds < 2.5, seconds
     assert list(out.parent.iterdir()) == []
+
+
+# ---------------------------------------------------------------- 10: a warm first fit, whole process
+#: a command-line process that reports what ran at its end: its exit handlers, and the interpreter's teardown
+#: (which frees ``KEEP``, a module global of ``__main__``, only when it clears the modules)
+_ENDING = r"""
+import atexit, os, sys, threading, time
+class Marker:
+    def __del__(self, write=os.write):
+        write(1, b"teardown ran\n")
+KEEP = Marker()
+import ctypes
+# the last handler to run: a native library's output, held in the C library's buffer of a pipe until flushed
+atexit.register(ctypes.CDLL(None).printf, b"printed by C\n")
+atexit.register(lambda: os.write(1, b"exit handlers ran\n"))
+def late():
+    time.sleep(1.0)
+    os.write(1, b"thread finished\n")
+if sys.argv[1] == "thread":  # a non-daemon thread still running when the command returns
+    threading.Thread(target=late).start()
+sys.argv = ["polyjax", "--cache-dir", sys.argv[2], "cache", "info"]
+from polyjax.cli import main
+sys.exit(main())
+"""
+
+
+def _ending(tmp_path, mode):
+    env = dict(os.environ, POLYJAX_PROGRESS="off")
+    for name in ("POLYJAX_FAST_EXIT", "PYTHONUNBUFFERED"):  # buffered streams, Python's and the C library's
+        env.pop(name, None)
+    return subprocess.run([sys.executable, "-c", _ENDING, mode, str(tmp_path / "cache")], capture_output=True,
+                          text=True, env=env, timeout=120)
+
+
+def test_whole_process_first_fit_costs_no_extra_exit_time(tmp_path):
+    """The command line ends its process once the command has returned: output flushed, exit handlers run, and
+    no interpreter teardown (0.3-0.4 s of CPU with JAX imported: ``benchmarks/RESULTS.md``)."""
+    proc = _ending(tmp_path, "plain")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[-2:] == ["exit handlers ran", "printed by C"], proc.stdout
+    assert "teardown ran" not in lines, proc.stdout
+    assert any("cache" in line for line in lines[:-2]), proc.stdout  # the command's own output, complete
+
+
+def test_whole_process_ends_ordinarily_while_a_thread_still_runs(tmp_path):
+    """A non-daemon thread alive at the end: Python's ordinary exit, which waits for the thread to finish."""
+    proc = _ending(tmp_path, "thread")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines.count("exit handlers ran") == 1, proc.stdout
+    assert lines.index("thread finished") < lines.index("exit handlers ran"), proc.stdout
+
+
+def test_fitting_a_baseline_by_name_loads_no_other_model_provider():
+    """``polyjax fit --model cook-torrance`` finds its fitter without importing every provider of saved models:
+    the capture fits' (``polyjax.inverse``, with the renderer) stays unloaded; an unknown name still lists all."""
+    code = ("import sys; from polyjax import UnknownNameError; from polyjax.internal import fitter_for\n"
+            "kind, name = fitter_for('Cook_Torrance'); assert name == 'cook-torrance', name\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('polyjax.inverse', 'polyjax.render'))))\n"
+            "try:\n    fitter_for('no-such-model')\nexcept UnknownNameError as e:\n    print(e)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    loaded, message = proc.stdout.splitlines()
+    assert loaded == "[]", loaded
+    assert "'ward'" in message and "'roughplastic'" in message, message

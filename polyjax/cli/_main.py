@@ -16,6 +16,7 @@ import jax
 from .._cache.compilation import cache_disabled_by_env, cache_uses, enable_compilation_cache
 from .._errors import InputError, PolyjaxError
 from .._run import interrupt
+from .._run.ending import end_process
 from ._args import Parser, add_global_options
 from ._cache import cache_cap_bytes, trim_cache
 
@@ -71,9 +72,20 @@ def _compilation_cache(args):
 def main(argv: list[str] | None = None) -> int:
     """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status (2 on a polyjax error,
     130 on Ctrl-C: the program's own run, ``argv`` None, stops its work within a second or two, removes what it left
-    half made, prints ``interrupted``: :mod:`polyjax._run.interrupt`)."""
+    half made, prints ``interrupted``: :mod:`polyjax._run.interrupt`).
+
+    The program's own run (``argv`` None) then ends the process itself once the command has returned: its output
+    flushed and its exit handlers run, without the interpreter's teardown (:mod:`polyjax._run.ending`: 0.3-0.4 s
+    of CPU in every process that imported JAX); an exception, or a thread still running, takes Python's ordinary
+    exit."""
     if argv is None:
         interrupt.install()
+        return end_process(_run(None))
+    return _run(argv)
+
+
+def _run(argv: list[str] | None) -> int:
+    """:func:`main`'s command run: the exit status."""
     jax.config.update("jax_enable_x64", True)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
