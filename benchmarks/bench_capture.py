@@ -11,7 +11,8 @@ Objects: the five 8-bit crops of ``$POLYJAX_DATA/diligent/crop8`` (all 96 lights
 normals score the fits and are never used by them. One setting for every object (``fit_capture``'s defaults).
 Error of the normals: mean over the mask's pixels of the angle to the ground truth, degrees. Relighting error:
 relative RMS over the mask's pixels of the held-out images with no saturated channel. The fit is run twice (the
-second run, warm, is timed; the first runs one alternation, which compiles every program). ``--figure PATH`` writes normal and error maps.
+second run, warm, is timed; the first runs one alternation, which compiles every program).
+``--figure PATH`` writes normal and error maps.
 
 Run: ``python benchmarks/bench_capture.py [--step S] [--objects cat,pot1,...] [--figure benchmarks/capture.png]``.
 """

@@ -13,7 +13,9 @@ for positive residuals (highlights) than negative ones (cast shadows, inter-refl
 **Update** (:func:`gauss_newton_normals`): with the pixel's BRDF fixed (``rho / pi + sum_k m_k g_k``), damped
 Gauss-Newton (Levenberg-Marquardt) steps on the two tangent coordinates ``(a, b)`` of ``n = normalise(n0 + a t1 +
 b t2)``, residuals ``sqrt(w) (obs - max(n . d, 0) f(u, v))``, the Jacobian by ``jax.jacfwd``; a step is kept only
-where it lowers the pixel's cost.
+where it lowers the pixel's cost. :func:`joint_normals` takes the same steps on the normal and the pixel's linear
+coefficients ``x`` (diffuse albedo, lobe weights) together, the prediction linear in ``x``, the damping scaled by
+each column of the Jacobian (Marquardt) and ``x`` projected onto ``x >= 0`` after the step.
 """
 
 from __future__ import annotations
@@ -179,5 +181,5 @@ def gauss_newton_normals(normals, obs, w, shade_fn, params, steps: int = 2, damp
     return jax.vmap(one)(normals, obs, w, params)
 
 
-__all__ = ["gauss_newton_normals", "joint_normals", "lambertian_normals", "local_directions", "safe_sqrt", "small_lstsq",
-           "tangent_frame"]
+__all__ = ["gauss_newton_normals", "joint_normals", "lambertian_normals", "local_directions", "safe_sqrt",
+           "small_lstsq", "tangent_frame"]
