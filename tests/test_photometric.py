@@ -159,7 +159,7 @@ def test_clamped_fit_from_images_is_bounded_under_lights_outside_the_fitted_rang
     the fitted lights it is the same model."""
     _, cap = synthetic
     fit, out = cap.select([0, 1, 3, 5]), cap.select([2, 4, 6, 7])
-    kw = dict(interactions=True, weighting="brdf", cutoff_deg=None)
+    kw = dict(interactions=True, weighting="brdf", cutoff_deg=None, link="identity")
     free = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, clamp=False, **kw)
     model = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, clamp=True, **kw)
     assert model.clamp and not free.clamp
