@@ -11,7 +11,8 @@ Objects: the five 8-bit crops of ``$POLYJAX_DATA/diligent/crop8`` (all 96 lights
 normals score the fits and are never used by them. One setting for every object (``fit_capture``'s defaults).
 Error of the normals: mean over the mask's pixels of the angle to the ground truth, degrees. Relighting error:
 relative RMS over the mask's pixels of the held-out images with no saturated channel. The fit is run twice (the
-second run, warm, is timed). ``--figure PATH`` writes normal and error maps.
+second run, warm, is timed; the first runs one alternation, which compiles every program).
+``--figure PATH`` writes normal and error maps.
 
 Run: ``python benchmarks/bench_capture.py [--step S] [--objects cat,pot1,...] [--figure benchmarks/capture.png]``.
 """
@@ -85,15 +86,16 @@ def measure(name: str, step: int):
     gt, mask = np.asarray(capture.normals), np.asarray(capture.mask)
     blind = train.__class__(train.images, train.mask, None, train.light_directions, train.light_intensities,
                             train.names, train.saturation, train.quantisation)
-    pj.fit_capture(blind)  # compile
-    t0 = time.perf_counter()
+    pj.fit_capture(blind, iterations=1)  # compile (the same programs: one alternation is enough)
+    t0, c0 = time.perf_counter(), time.process_time()
     fit = pj.fit_capture(blind)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     lam = lambertian(train)
     e_lam, e_ours = angular_error(lam, gt, mask), angular_error(fit.normals, gt, mask)
     r_anchor, r_ours = relative_rms(anchor(train, test), test), relative_rms(pj.relight(fit, test), test)
     row = dict(object=name, pixels=int(mask.sum()), lights=train.n_lights, lambertian=float(e_lam.mean()),
-               ours=float(e_ours.mean()), anchor=r_anchor, relight=r_ours, seconds=seconds,
+               ours=float(e_ours.mean()), anchor=r_anchor, relight=r_ours, seconds=seconds, cpu=cpu,
+               load=os.getloadavg()[0],
                status=pj.RESULTS(int(fit.status)).name, iterations=fit.iterations)
     maps = dict(gt=gt, lam=lam, ours=np.asarray(fit.normals), mask=mask)
     return row, maps
@@ -131,15 +133,16 @@ def main():
     args = ap.parse_args()
     rows, all_maps = [], {}
     print("| object | pixels | lights fitted | Lambertian LS (deg) | fit_capture (deg) | ratio | anchor rel. RMS | "
-          "fit_capture rel. RMS | ratio | fit (s) | status |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "fit_capture rel. RMS | ratio | fit (s) | CPU (s) | load | status |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.objects.split(","):
         row, maps = measure(name, args.step)
         rows.append(row)
         all_maps[name] = maps
         print(f"| {name} | {row['pixels']} | {row['lights']} | {row['lambertian']:.2f} | {row['ours']:.2f} | "
               f"{row['ours'] / row['lambertian']:.3f} | {row['anchor']:.4f} | {row['relight']:.4f} | "
-              f"{row['relight'] / row['anchor']:.3f} | {row['seconds']:.1f} | {row['status']} "
+              f"{row['relight'] / row['anchor']:.3f} | {row['seconds']:.1f} | {row['cpu']:.1f} | {row['load']:.1f} | "
+              f"{row['status']} "
               f"({row['iterations']} it.) |", flush=True)
     ratios = [r["ours"] / r["lambertian"] for r in rows]
     rel = [r["relight"] / r["anchor"] for r in rows]

@@ -46,6 +46,19 @@ def _positive(model):
     return eqx.tree_at(lambda m: m.coefficients, model, model.coefficients.at[:, 0].add(max(0.0, -low) + 0.05))
 
 
+#: the linear fit these tests check (identity link, radiance weights, the 80-degree cutoff, unclamped), not the
+#: photographs' defaults of ``fit_polynomial_to_images``
+LINEAR = dict(variables="lafortune", interactions=False, link="identity", weighting="radiance", cutoff_deg=80.0,
+              clamp=False)
+
+
+def _fit(scenes, images, *args, **kwargs):
+    """``pj.fit_polynomial_to_images`` with the :data:`LINEAR` options unless given."""
+    if args:
+        kwargs["variables"] = args[0]
+    return pj.fit_polynomial_to_images(scenes, images, **{**LINEAR, **kwargs})
+
+
 def _mixed_scenes():
     """A sphere on a plane (shadows) under a point light and an environment map, and a lone sphere under a sky."""
     sky = pr.procedural_sky(16, 32, sun_radiance=30.0)
@@ -71,13 +84,13 @@ def test_light_samples_render_like_the_renderer():
 def test_refit_of_rendered_polynomial_recovers_coefficients(which):
     """A polynomial model rendered under several lights and refitted from its own images: coefficients to 1e-8."""
     scenes = _scenes() if which == "point" else _mixed_scenes()
-    model = pj.fit_polynomial_to_images(scenes, _images(scenes, PHONG), variables="lafortune", degree=4, spp=16)
+    model = _fit(scenes, _images(scenes, PHONG), variables="lafortune", degree=4, spp=16)
     assert np.all(np.asarray(model.status) == pj.RESULTS.OK)
     assert model.batch_shape == (3,) and model.coefficients.shape == (3, 9)
     # the renderer transports max(f, 0): shift the model (constant Legendre term) to be positive on the hemisphere
     # so that its images are linear in its coefficients
     model = _positive(model)
-    refit = pj.fit_polynomial_to_images(scenes, _images(scenes, model), variables="lafortune", degree=4, spp=16)
+    refit = _fit(scenes, _images(scenes, model), variables="lafortune", degree=4, spp=16)
     scale = float(jnp.max(jnp.abs(model.coefficients)))
     assert float(jnp.max(jnp.abs(refit.coefficients - model.coefficients))) <= 1e-8 * scale
     assert float(jnp.max(refit.l2)) < 1e-10 * float(jnp.max(jnp.stack(_images(scenes, model))))
@@ -89,7 +102,7 @@ def test_refit_of_rendered_polynomial_recovers_coefficients(which):
 def test_excluded_pixels_saturated_nonfinite_off_object():
     """Pixels that are saturated, NaN/inf or off the object do not enter the fit (and their number is reported)."""
     scenes = _scenes()
-    model = _positive(pj.fit_polynomial_to_images(scenes, _images(scenes, PHONG), degree=3))
+    model = _positive(_fit(scenes, _images(scenes, PHONG), degree=3))
     clean = _images(scenes, model)
     ls = light_samples(scenes[0])
     on = np.flatnonzero(np.asarray(ls.on_target) & (np.asarray(ls.weight).sum(axis=(1, 2)) > 0))
@@ -99,13 +112,13 @@ def test_excluded_pixels_saturated_nonfinite_off_object():
     flat[on[20], 0] = np.inf
     flat[on[30:35]] = 50.0  # clipped highlights: at the saturation level
     bad[0][~np.asarray(ls.on_target).reshape(SIZE, SIZE)] = 7.0  # background junk
-    refit = pj.fit_polynomial_to_images(scenes, bad, degree=3, saturation=50.0)
+    refit = _fit(scenes, bad, degree=3, saturation=50.0)
     # the same fit as the clean images with exactly those 7 pixels given weight 0
     w0 = np.ones(SIZE * SIZE)
     w0[[on[10], on[20], *on[30:35]]] = 0.0
     weights = [w0.reshape(SIZE, SIZE)] + [np.ones((SIZE, SIZE))] * 3
-    base = pj.fit_polynomial_to_images(scenes, clean, degree=3, pixel_weights=weights)
-    full = pj.fit_polynomial_to_images(scenes, clean, degree=3)
+    base = _fit(scenes, clean, degree=3, pixel_weights=weights)
+    full = _fit(scenes, clean, degree=3)
     assert int(refit.n_used[0]) == int(base.n_used[0]) == int(full.n_used[0]) - 7
     np.testing.assert_allclose(np.asarray(refit.coefficients), np.asarray(base.coefficients), rtol=0,
                                atol=1e-10 * float(jnp.max(jnp.abs(base.coefficients))))
@@ -119,7 +132,7 @@ def test_shadowed_pixels_excluded():
     ls = light_samples(point_only, target=1)
     assert int(jnp.sum(ls.shadowed & ls.on_target)) > 20  # the sphere's shadow on the plane
     img = pr.render(_with_brdf(point_only, PHONG), dtype=jnp.float64).image
-    plane_fit = pj.fit_polynomial_to_images([point_only], [img], degree=1, target=1, cutoff_deg=None)
+    plane_fit = _fit([point_only], [img], degree=1, target=1, cutoff_deg=None)
     lit = np.asarray(ls.on_target & ~ls.shadowed & (ls.v[:, 2] > 0) & (jnp.sum(ls.weight, axis=(1, 2)) > 0))
     assert int(plane_fit.n_used[0]) == int(lit.sum())
 
@@ -131,7 +144,7 @@ def test_fit_is_linear_in_the_images_forward_mode():
     tangent = jnp.stack(_images(scenes, pr.Phong(kd=0.2, ks=0.1, exponent=5.0)))
 
     def coef(x):
-        return pj.fit_polynomial_to_images(scenes, x, degree=3).coefficients
+        return _fit(scenes, x, degree=3).coefficients
 
     _, jv = jax.jvp(coef, (imgs,), (tangent,))
     np.testing.assert_allclose(np.asarray(jv), np.asarray(coef(tangent)), rtol=0,
@@ -142,16 +155,16 @@ def test_bad_inputs_name_the_argument():
     scenes = _scenes()[:2]
     imgs = _images(scenes, PHONG)
     with pytest.raises(pj.InputError, match="images: expected one image per scene"):
-        pj.fit_polynomial_to_images(scenes, imgs[:1])
+        _fit(scenes, imgs[:1])
     with pytest.raises(pj.InputError, match=r"images\[1\]: expected linear RGB of shape \(40, 40, 3\)"):
-        pj.fit_polynomial_to_images(scenes, [imgs[0], imgs[1][:, :, :2]])
+        _fit(scenes, [imgs[0], imgs[1][:, :, :2]])
     with pytest.raises(pj.InputError, match="degree"):
-        pj.fit_polynomial_to_images(scenes, imgs, degree=[2, 3])
+        _fit(scenes, imgs, degree=[2, 3])
     with pytest.raises(pj.InputError, match="scenes\\[0\\]"):
-        pj.fit_polynomial_to_images(["scene"], imgs[:1])
+        _fit(["scene"], imgs[:1])
     bounce = pr.Scene(_cam(), [pr.Sphere(PHONG), pr.Plane(PHONG)], [pr.PointLight()], max_bounces=1)
     with pytest.raises(pj.InputError, match="max_bounces"):
-        pj.fit_polynomial_to_images([bounce], imgs[:1])
+        _fit([bounce], imgs[:1])
 
 
 @pytest.mark.data
@@ -164,7 +177,7 @@ def test_neural_merl_from_images_close_to_direct_fit():
     l2_direct = pj.l2_error(data.values, direct(data.u, data.v), data.u, data.v, data.weights)
     cam = _cam(96)
     scenes = [pr.Scene(cam, [pr.Sphere(pr.Lambertian(0.5))], [pr.PointLight(p, 30.0)]) for p in POSITIONS]
-    fit = pj.fit_polynomial_to_images(scenes, _images(scenes, net), variables="lafortune", degree=3)
+    fit = _fit(scenes, _images(scenes, net), variables="lafortune", degree=3)
     l2_images = pj.l2_error(data.values, fit(data.u, data.v), data.u, data.v, data.weights)
     ratio = np.asarray(l2_images / l2_direct)
     assert np.all(ratio <= 1.2), ratio
@@ -175,8 +188,8 @@ def test_fit_under_jit_equals_eager_fit():
     """Under jit the pixel selection is traced (no compaction, one design per channel): the same fit."""
     scenes = _scenes()[:2]
     imgs = jnp.stack(_images(scenes, PHONG))
-    eager = pj.fit_polynomial_to_images(scenes, imgs, degree=3)
-    jitted = jax.jit(lambda x: pj.fit_polynomial_to_images(scenes, x, degree=3))(imgs)
+    eager = _fit(scenes, imgs, degree=3)
+    jitted = jax.jit(lambda x: _fit(scenes, x, degree=3))(imgs)
     np.testing.assert_allclose(np.asarray(jitted.coefficients), np.asarray(eager.coefficients), rtol=0,
                                atol=1e-10 * float(jnp.max(jnp.abs(eager.coefficients))))
     assert np.array_equal(np.asarray(jitted.n_used), np.asarray(eager.n_used))
@@ -184,7 +197,7 @@ def test_fit_under_jit_equals_eager_fit():
 
 def test_no_usable_pixel_is_flagged_not_raised():
     scene = pr.Scene(pr.Camera(width=16, height=16), [pr.Sphere(pr.Lambertian())], [pr.PointLight()])
-    model = pj.fit_polynomial_to_images([scene], [np.full((16, 16, 3), np.nan)], degree=2)
+    model = _fit([scene], [np.full((16, 16, 3), np.nan)], degree=2)
     assert np.all(np.asarray(model.status) == pj.RESULTS.NO_SAMPLES)
     assert np.all(np.asarray(model.n_used) == 0) and np.all(np.isinf(np.asarray(model.l2)))
     assert np.all(np.asarray(model.coefficients) == 0.0)
@@ -200,7 +213,7 @@ def test_image_rows_are_the_render():
     f = PHONG(rows.u, jnp.broadcast_to(rows.v[:, None, :], rows.u.shape))
     np.testing.assert_allclose(np.asarray(jnp.sum(rows.weight * f, axis=1)), np.asarray(rows.values), rtol=1e-12,
                                atol=1e-14)
-    fit = pj.fit_polynomial_to_images(scenes, images, degree=2, spp=8)
+    fit = _fit(scenes, images, degree=2, spp=8)
     assert int(fit.n_used[0]) == rows.u.shape[0]
     full = pj.image_rows(scenes, images, spp=8, compact=False)
     assert full.u.shape[0] == 4 * SIZE * SIZE and int(full.keep.sum()) == rows.u.shape[0]

@@ -38,7 +38,8 @@ def test_fit_images_command_recovers_the_api_fit(tmp_path, capsys):
     sphere = pr.Sphere(pr.Lambertian(0.5), radius=1.0)  # a placeholder BRDF: the fit replaces it
     scenes = [pr.Scene(cam, [sphere], [pr.PointLight(p, 30.0)]) for p in LIGHTS]
     images = [pr.read_exr(tmp_path / f"light{i}.exr") for i in range(len(LIGHTS))]
-    api = pj.fit_polynomial_to_images(scenes, images, variables="lafortune", degree=4)
+    api = pj.fit_polynomial_to_images(scenes, images, variables="lafortune", degree=4, interactions=False,
+                                      link="identity", clamp=False, weighting="radiance", cutoff_deg=80.0)
     saved = pj.load_model(tmp_path / "m.npz")
     np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-12)
     assert out["pixels_used"] == int(api.n_used[0]) > 500

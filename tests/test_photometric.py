@@ -132,14 +132,14 @@ def test_float_capture_refits_exactly(truth, synthetic):
     """Images rendered from a polynomial of the fitted space give it back: predictions to 1e-8 (every fit path),
     and the 16-bit capture within its quantisation."""
     folder, cap = synthetic
-    for opts in (dict(), dict(weighting="brdf", robust_steps=1)):
+    for opts in (dict(weighting="radiance"), dict(weighting="brdf", robust_steps=1)):
         model = pj.fit_polynomial_to_images(cap.scenes, cap.images, "lafortune", 2, interactions=True,
-                                            cutoff_deg=None, **opts)
+                                            cutoff_deg=None, link="identity", **opts)
         assert np.all(np.asarray(model.status) == 0)
         np.testing.assert_allclose(np.asarray(pj.relight(model, cap)), np.asarray(cap.images), atol=1e-8, rtol=0)
     loaded = pj.data.load_photometric(folder)
     model = pj.fit_polynomial_to_images(loaded.scenes, loaded.images, "lafortune", 2, interactions=True,
-                                        cutoff_deg=None, saturation=loaded.saturation)
+                                        cutoff_deg=None, link="identity", saturation=loaded.saturation)
     err = np.abs(np.asarray(pj.relight(model, loaded)) - np.asarray(cap.images))
     assert err.max() < 2 / 65535  # the fit averages the rounding error of 1/2 step
 
@@ -159,8 +159,8 @@ def test_clamped_fit_from_images_is_bounded_under_lights_outside_the_fitted_rang
     the fitted lights it is the same model."""
     _, cap = synthetic
     fit, out = cap.select([0, 1, 3, 5]), cap.select([2, 4, 6, 7])
-    kw = dict(interactions=True, weighting="brdf", cutoff_deg=None)
-    free = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, **kw)
+    kw = dict(interactions=True, weighting="brdf", cutoff_deg=None, link="identity")
+    free = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, clamp=False, **kw)
     model = pj.fit_polynomial_to_images(fit.scenes, fit.images, "rusinkiewicz", 6, clamp=True, **kw)
     assert model.clamp and not free.clamp
     np.testing.assert_allclose(np.asarray(pj.relight(model, fit)), np.asarray(pj.relight(free, fit)), rtol=1e-12,
@@ -288,3 +288,17 @@ def test_diligent_ball_loads(data_root):
     np.testing.assert_array_equal(cap.images[1], direct)
     assert len(np.unique(np.round(cap.images[1] * 65535) % 256)) > 200  # not 8-bit values scaled
     np.testing.assert_allclose(np.linalg.norm(cap.normals[cap.mask], axis=-1), 1.0, atol=1e-6)
+
+
+def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path):
+    """``polyjax fit-photos`` and ``pj.fit_polynomial_to_images`` with no options make the same model, clamped."""
+    from polyjax.cli import main
+
+    folder, _ = synthetic
+    path = tmp_path / "m.npz"
+    main(["--no-cache", "fit-photos", str(folder), "--save", str(path)])
+    cap = pj.data.load_photometric(folder).cropped()
+    api = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=cap.saturation)
+    saved = pj.load_model(path)
+    assert saved.spec == api.spec and api.clamp and api.link == "log" and api.variables == "rusinkiewicz"
+    np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-9, atol=1e-12)

@@ -181,7 +181,7 @@ def run_fit_images(args) -> int:
         check_model_file(args.save, "--save")  # before any work
     scenes, images, target = load_scene_json(args.scene)
     model = pj.fit_polynomial_to_images(scenes, images, spec=spec, target=target, saturation=args.saturation,
-                                        cutoff_deg=args.cutoff, spp=args.spp)
+                                        cutoff_deg=args.cutoff, spp=args.spp, weighting="radiance")
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
     out = {
         "images": len(images), "pixels_used": int(np.asarray(model.n_used)[0]), "variables": spec.variables,

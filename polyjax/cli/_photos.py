@@ -11,6 +11,7 @@ map), and prints the relative RMS and PSNR.
 
 from __future__ import annotations
 
+import inspect
 import json
 import time
 from pathlib import Path
@@ -30,9 +31,13 @@ from ._capture_out import textures_folder, write_textures_beside
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model (clamped to
 #: the fitted box, so it stays bounded under lights unlike the fitted ones), then the fit's other options. The log
 #: link is the best bounded configuration of that table in both directions of the split (0.830x and 0.875x the
-#: 8-nearest-neighbour anchor, clamped; the identity link 0.938x and 0.980x)
-DEFAULT_SPEC = pj.PolynomialSpec("rusinkiewicz", 8, interactions=True, link="log", clamp=True)
-DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=0, cutoff=90.0)
+#: 8-nearest-neighbour anchor, clamped; the identity link 0.938x and 0.980x). One source: the API's own defaults
+#: (:func:`polyjax.fit_polynomial_to_images`; its ``weighting="auto"`` is ``"brdf"`` on photographs)
+_API = {k: p.default for k, p in inspect.signature(pj.fit_polynomial_to_images).parameters.items()}
+DEFAULT_SPEC = pj.PolynomialSpec(_API["variables"], _API["degree"], interactions=_API["interactions"],
+                                 link=_API["link"], clamp=_API["clamp"])
+DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=_API["robust_steps"],
+                cutoff=90.0 if _API["cutoff_deg"] is None else _API["cutoff_deg"])
 
 
 def parse_lights(text: str | None):

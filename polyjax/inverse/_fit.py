@@ -40,25 +40,25 @@ from ._samples import WEIGHTINGS, fit_samples
 def fit_polynomial_to_images(
     scenes: Sequence,
     images: Sequence[ArrayLike] | ArrayLike,
-    variables: str = "lafortune",
-    degree: int = 5,
+    variables: str = "rusinkiewicz",
+    degree: int = 8,
     *,
     target: int = 0,
     pixel_weights: Sequence[ArrayLike] | ArrayLike | None = None,
     saturation: float | None = None,
-    cutoff_deg: float | None = 80.0,
+    cutoff_deg: float | None = None,
     spp: int = 64,
     seed: int = 0,
     basis: str = "legendre",
-    interactions: bool = False,
+    interactions: bool = True,
     method: str = "qr",
     rcond: float | None = None,
-    link: str = "identity",
+    link: str = "log",
     eps: float = 1e-3,
     steps: int = 3,
-    weighting: str = "radiance",
+    weighting: str = "auto",
     robust_steps: int = 0,
-    clamp: bool = False,
+    clamp: bool = True,
     spec: PolynomialSpec | None = None,
 ) -> PolynomialBRDF:
     r"""Fit an RGB polynomial BRDF (equation (3)) to images of one object under known lighting. Over 80 lines
@@ -108,9 +108,15 @@ def fit_polynomial_to_images(
         basis, interactions, method, rcond: as in :func:`polyjax.fit_polynomial`.
         link, eps, steps: ``link="log"`` fits ``f = exp(poly) - eps`` (:func:`polyjax.fit_log_polynomial`, on the
             pixels' BRDF samples; one light sample per pixel).
-        weighting: ``"radiance"`` (the squared pixel residuals, above) or ``"brdf"`` (``sum w (I / c - f)^2``:
+        weighting: ``"radiance"`` (the squared pixel residuals, above), ``"brdf"`` (``sum w (I / c - f)^2``:
             the residuals of the pixels' BRDF samples ``I / c``, one light sample per pixel;
-            :mod:`polyjax.inverse._samples`).
+            :mod:`polyjax.inverse._samples`), or ``"auto"`` (the default: ``"brdf"`` when every pixel has one light
+            sample, photographs under point or directional lights; ``"radiance"`` otherwise).
+
+    **Defaults** (``rusinkiewicz`` p = 8 with interactions, log link, clamped to the fitted box, BRDF-space weights,
+    no grazing cutoff): the configuration measured best on photographs (``benchmarks/bench_photometric.py``, the
+    DiLiGenT ball), the same as ``polyjax fit-photos``; clamped, so no default extrapolates unbounded. Scenes lit by
+    an environment map (several light samples per pixel) need ``link="identity"``.
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
             their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
         clamp: the model evaluates its polynomial at the scaled components clamped to the box of the fitted
@@ -139,10 +145,12 @@ def fit_polynomial_to_images(
         raise InputError(f"robust_steps: expected a non-negative integer, found {robust_steps!r}")
     if link not in ("identity", "log"):
         raise InputError(f"link: expected 'identity' or 'log', found {link!r}")
-    if weighting not in WEIGHTINGS:
-        raise InputError(f"weighting: expected one of {WEIGHTINGS}, found {weighting!r}")
+    if weighting not in WEIGHTINGS + ("auto",):
+        raise InputError(f"weighting: expected one of {WEIGHTINGS + ('auto',)}, found {weighting!r}")
     rows = image_rows(scenes, images, target=target, pixel_weights=pixel_weights, saturation=saturation,
                       cutoff_deg=cutoff_deg, spp=spp, seed=seed)
+    if weighting == "auto":  # BRDF-space residuals where each pixel is one BRDF sample (point, directional lights)
+        weighting = "brdf" if rows.u.shape[1] == 1 else "radiance"
     if link != "identity" or weighting != "radiance" or robust_steps:
         options = dict(basis=basis, interactions=bool(interactions), method=method, rcond=rcond)
         if link == "log":

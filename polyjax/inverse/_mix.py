@@ -4,7 +4,8 @@ r"""The BRDF solves of :func:`polyjax.fit_capture`, with the normals fixed.
 v))`` is linear in its diffuse albedo ``rho (3,)`` and lobe weights ``m (K,)``: a weighted least-squares solve of the
 ``(3 L, 3 + K)`` design by QR, then the columns of negative coefficients dropped and the solve repeated (an
 active-set pass of non-negative least squares, ``K + 1`` rounds), vmapped over the block's pixels; ``rho`` is at most
-``pi max_l obs_l / 0.2`` (:data:`MIN_BRIGHTEST_COS`).
+``pi max_l obs_l / 0.2`` (:data:`MIN_BRIGHTEST_COS`) and ``m_k`` at most ``max_l obs_l / (0.2 max g_k)`` (grey):
+no term predicts more than its pixel's brightest value seen at a cosine of 0.2.
 
 **Shared lobes** (:func:`fit_lobes`): each pixel belongs to the lobe of its largest weight; lobe ``k``'s polynomial
 BRDF (per channel, Rusinkiewicz ``theta_h, theta_d``, clamped to the fitted box so it stays bounded) is fitted in
@@ -108,7 +109,9 @@ def _mix_pixel(n, obs, w, directions, table):
         keep = keep & (x >= 0)
     x = jnp.maximum(x, 0.0)
     bound = jnp.pi * jnp.max(obs, axis=0) / MIN_BRIGHTEST_COS
-    return jnp.minimum(x[:3], bound), x[3:]
+    peak = jnp.max(jnp.mean(table, -1), axis=(1, 2))  # (K,) each lobe's largest grey value
+    lobe_bound = jnp.max(jnp.mean(obs, -1)) / (MIN_BRIGHTEST_COS * jnp.maximum(peak, 1e-12))
+    return jnp.minimum(x[:3], bound), jnp.minimum(x[3:], lobe_bound)
 
 
 def solve_mix(normals, obs, w, directions, table):

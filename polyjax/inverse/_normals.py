@@ -13,7 +13,9 @@ for positive residuals (highlights) than negative ones (cast shadows, inter-refl
 **Update** (:func:`gauss_newton_normals`): with the pixel's BRDF fixed (``rho / pi + sum_k m_k g_k``), damped
 Gauss-Newton (Levenberg-Marquardt) steps on the two tangent coordinates ``(a, b)`` of ``n = normalise(n0 + a t1 +
 b t2)``, residuals ``sqrt(w) (obs - max(n . d, 0) f(u, v))``, the Jacobian by ``jax.jacfwd``; a step is kept only
-where it lowers the pixel's cost.
+where it lowers the pixel's cost. :func:`joint_normals` takes the same steps on the normal and the pixel's linear
+coefficients ``x`` (diffuse albedo, lobe weights) together, the prediction linear in ``x``, the damping scaled by
+each column of the Jacobian (Marquardt) and ``x`` projected onto ``x >= 0`` after the step.
 """
 
 from __future__ import annotations
@@ -119,6 +121,47 @@ def _pixel_step(n0, obs, w, shade, damping):
     return jnp.where(better, normal(step), n0), jnp.where(better, jnp.sum(r1**2), jnp.sum(r0**2))
 
 
+def _joint_step(n0, x0, obs, w, shade, damping):
+    """One Levenberg-Marquardt step of one pixel's normal and its non-negative linear coefficients ``x`` together
+    (module notes); ``shade(n, x) -> (L, 3)``. The coefficients are projected onto ``x >= 0`` after the step."""
+    t1, t2 = tangent_frame(n0)
+
+    def normal(ab):
+        n = n0 + ab[0] * t1 + ab[1] * t2
+        return n / jnp.linalg.norm(n)
+
+    sw = safe_sqrt(w)
+    k = x0.shape[0]
+
+    def residual(p):
+        return ((obs - shade(normal(p[:2]), x0 + p[2:])) * sw).reshape(-1)
+
+    zero = jnp.zeros(2 + k, obs.dtype)
+    r0 = residual(zero)
+    jac = jax.jacfwd(residual)(zero)
+    scale = jnp.sqrt(jnp.sum(jac**2, 0) + 1e-30)  # Marquardt's scaling: damping relative to each column
+    a = jnp.concatenate([jac, jnp.sqrt(damping) * jnp.diag(scale)])
+    step = small_lstsq(a, jnp.concatenate([-r0, zero]), ridge=0.0)
+    step = jnp.concatenate([jnp.clip(step[:2], -0.3, 0.3), jnp.maximum(x0 + step[2:], 0.0) - x0])
+    c0, c1 = jnp.sum(r0**2), jnp.sum(residual(step) ** 2)
+    better = c1 < c0
+    return (jnp.where(better, normal(step[:2]), n0), jnp.where(better, x0 + step[2:], x0),
+            jnp.where(better, c1, c0))
+
+
+def joint_normals(normals, coefs, obs, w, shade_fn, steps: int = 3, damping: float = 1e-3):
+    """``steps`` Levenberg-Marquardt steps of every pixel's normal and linear coefficients ``coefs (P, k)`` together
+    (``shade_fn(n, x) -> (L, 3)``, linear in ``x >= 0``), vmapped over the block; returns ``(normals, coefs, cost)``.
+    """
+    def one(n, x, o, wi):
+        cost = jnp.zeros((), o.dtype)
+        for _ in range(steps):
+            n, x, cost = _joint_step(n, x, o, wi, shade_fn, damping)
+        return n, x, cost
+
+    return jax.vmap(one)(normals, coefs, obs, w)
+
+
 def gauss_newton_normals(normals, obs, w, shade_fn, params, steps: int = 2, damping: float = 1e-3):
     """``steps`` damped Gauss-Newton steps of every pixel's normal (module notes), vmapped over the block.
 
@@ -138,5 +181,5 @@ def gauss_newton_normals(normals, obs, w, shade_fn, params, steps: int = 2, damp
     return jax.vmap(one)(normals, obs, w, params)
 
 
-__all__ = ["gauss_newton_normals", "lambertian_normals", "local_directions", "safe_sqrt", "small_lstsq",
-           "tangent_frame"]
+__all__ = ["gauss_newton_normals", "joint_normals", "lambertian_normals", "local_directions", "safe_sqrt",
+           "small_lstsq", "tangent_frame"]

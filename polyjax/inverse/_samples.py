@@ -55,7 +55,8 @@ def samples_of_rows(rows, weighting: str):
         raise InputError(f"weighting: expected one of {WEIGHTINGS}, found {weighting!r}")
     if rows.u.shape[1] != 1:
         raise InputError(f"scenes: link='log', weighting='brdf' and robust steps need one point or directional light "
-                         f"per image (one light sample per pixel), found {rows.u.shape[1]} samples per pixel")
+                         f"per image (one light sample per pixel), found {rows.u.shape[1]} samples per pixel: pass "
+                         f"link='identity' and weighting='radiance'")
     u, c = rows.u[:, 0], rows.weight[:, 0]
     lit = rows.keep & jnp.all(c > 0, axis=-1)
     c_safe = jnp.where(lit[:, None], c, 1.0)
