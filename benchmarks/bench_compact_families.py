@@ -132,13 +132,27 @@ def merl_table(names, sizes, skew=()):
     best_lg = np.minimum(pub["sgd"][1], pub["abc"][1])
     rows = ["| family | size | numbers | L2 median ratio | L2 better | L2 worst (material) | log median ratio | "
             "log better | log worst (material) | better on both |", "|---|---|---|---|---|---|---|---|---|---|"]
+    errors = {}
     for (family, size), (pred, n_num) in sorted(merl_runs(names, sizes, fit, score, skew).items()):
-        l2, lg = scores(score.values, pred, score)
+        l2, lg = errors[family, size] = scores(score.values, pred, score)
         r2, rl = l2 / best_l2, lg / best_lg
         rows.append(f"| {family} | {size} | {n_num} | {np.median(r2):.3f} | {np.sum(r2 < 1)} | {r2.max():.2f} "
                     f"({names[int(r2.argmax())]}) | {np.median(rl):.3f} | {np.sum(rl < 1)} | {rl.max():.2f} "
                     f"({names[int(rl.argmax())]}) | {np.sum((r2 < 1) & (rl < 1))} |")
-    return rows
+    return rows + skew_against_basis(errors)
+
+
+def skew_against_basis(errors):
+    """Per material, each skew configuration's held-out errors over the basis family's at the same size."""
+    rows = ["", "| skew / basis (same size) | size | L2: median, max, materials better | "
+                "log: median, max, materials better |", "|---|---|---|---|"]
+    for (label, size), (l2, lg) in sorted(errors.items()):
+        if label.startswith("skew") and ("basis", size) in errors:
+            b2, blg = errors["basis", size]
+            r2, rl = l2 / b2, lg / blg
+            rows.append(f"| {label} | {size} | {np.median(r2):.3f}, {r2.max():.2f}, {np.sum(r2 < 1)} | "
+                        f"{np.median(rl):.3f}, {rl.max():.2f}, {np.sum(rl < 1)} |")
+    return rows if len(rows) > 4 else []
 
 
 def rgl_table(sizes, skew=()):
