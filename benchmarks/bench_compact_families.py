@@ -14,7 +14,12 @@ CUReT (61 materials, 205 samples each, one channel) and Cornell (3 files) fitted
 on the other half (log metric, weights 1), basis against polynomial; and the fit time of one MERL material on
 20,000 samples after compilation (median of 10).
 
-Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_families.py [--materials N] [--sizes 9,16,33]``
+``--skew 1,3,8`` adds the ``skew`` family (the basis with ``m`` non-reciprocal rows, each ``m`` given) to the MERL
+table (leave-one-out bases, and each skew configuration's held-out errors over the basis family's per material) and
+to the RGL table.
+
+Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_families.py [--materials N] [--sizes 9,16,33]
+[--skip merl,rgl,other,time] [--skew 1,3,8]``
 """
 
 import argparse
