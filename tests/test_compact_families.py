@@ -41,6 +41,7 @@ def test_configs_fit_the_budget_and_count_three_channels():
     assert skew.configs(9) == [(2, 1)]
 
 
+@pytest.mark.slow  # three more fits compiled
 def test_skew_family_fits_a_non_reciprocal_model_the_basis_cannot(merl):
     """Values made by the skew model itself (white paint's 8-row basis fit, its first 3 rows again times
     ``cos theta_u - cos theta_v``: ``f(u, v) != f(v, u)``): the skew fit finds the coefficients again, to rounding;
