@@ -14,7 +14,12 @@ CUReT (61 materials, 205 samples each, one channel) and Cornell (3 files) fitted
 on the other half (log metric, weights 1), basis against polynomial; and the fit time of one MERL material on
 20,000 samples after compilation (median of 10).
 
-Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_families.py [--materials N] [--sizes 9,16,33]``
+``--skew 1,3,8`` adds the ``skew`` family (the basis with ``m`` non-reciprocal rows, each ``m`` given) to the MERL
+table (leave-one-out bases, and each skew configuration's held-out errors over the basis family's per material) and
+to the RGL table.
+
+Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_families.py [--materials N] [--sizes 9,16,33]
+[--skip merl,rgl,other,time] [--skew 1,3,8]``
 """
 
 import argparse
@@ -35,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).parents[1]))
 import polyjax as pj  # noqa: E402
 from benchmarks.bench_merl100 import published_predictions  # noqa: E402
 from benchmarks.learn_compact_basis import material_tables, node_weights, transform  # noqa: E402
-from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily  # noqa: E402
+from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily, CompactSkewFamily  # noqa: E402
 
 SIZES = (9, 16, 33, 64, 128, 256)
 RGL = ("paper_white_rgb", "satin_rosaline_rgb")
@@ -71,6 +76,11 @@ class LeaveOneOut:
         assert name not in fam.trained_on, f"the basis of {name} was learned from it"
         return fam
 
+    def skew(self, name, rows=BASIS_ROWS):
+        """The ``skew`` family on the same leave-one-out basis."""
+        fam = self.family(name, rows)
+        return CompactSkewFamily(np.asarray(fam.basis), fam.trained_on)
+
 
 def poly_config(size):
     """The polynomial family's configuration at a size: Rusinkiewicz with interactions, the largest degree."""
@@ -79,29 +89,35 @@ def poly_config(size):
     return max(ok, key=lambda c: c[1]) if ok else None
 
 
-def configs(size, hybrids=False):
-    """``{label: (family, config)}`` at a size: the polynomial, the basis alone and (``hybrids``) the basis with
-    the polynomial terms of degree 1 and 2 of the grid's coordinates."""
+def configs(size, hybrids=False, skew=()):
+    """``{label: (family, config)}`` at a size: the polynomial, the basis alone, (``hybrids``) the basis with
+    the polynomial terms of degree 1 and 2 of the grid's coordinates, and the ``skew`` family with each number ``m``
+    of non-reciprocal rows in ``skew`` (the largest ``k`` within the size)."""
     out = {"polynomial": ("polynomial", poly_config(size))}
     if size // 3 <= BASIS_ROWS:
         out["basis"] = ("basis", (size // 3, -1))
     for d, terms in ((1, 4), (2, 10)):
         if hybrids and size // 3 > terms:
             out[f"basis+poly{d}"] = ("basis", (size // 3 - terms, d))
+    for m in skew:
+        if m <= size // 3 - m <= BASIS_ROWS:
+            out[f"skew{m}"] = ("skew", (size // 3 - m, m))
     return {k: c for k, c in out.items() if c[1] is not None}
 
 
-def merl_runs(names, sizes, fit, score):
-    """``{(family, size): (predictions (m, 3, n), n_numbers)}`` on the score bins, leave-one-out bases."""
+def merl_runs(names, sizes, fit, score, skew=()):
+    """``{(label, size): (predictions (m, 3, n), n_numbers)}`` on the score bins, leave-one-out bases (the basis
+    family, and the ``skew`` family with each number of non-reciprocal rows in ``skew``, on the same basis)."""
     loo = LeaveOneOut(*material_tables(), node_weights())
     preds = {}
     for i, name in enumerate(names):
         fam = loo.family(name)
+        fams = {"basis": fam, "skew": CompactSkewFamily(np.asarray(fam.basis), fam.trained_on)}
         for size in sizes:
-            k = configs(size).get("basis", (None, None))[1]
-            if k is not None:
-                c = fam.fit(k, fit.u, fit.v, fit.values[i], fit.weights, None, "log")
-                preds.setdefault(("basis", size), []).append(fam.evaluate(k, c, score.u, score.v))
+            for label, (family, k) in configs(size, skew=skew).items():
+                if family in fams:
+                    c = fams[family].fit(k, fit.u, fit.v, fit.values[i], fit.weights, None, "log")
+                    preds.setdefault((label, size), []).append(fams[family].evaluate(k, c, score.u, score.v))
         if i % 10 == 9:
             print(f"  basis: {i + 1} materials", flush=True)
     out = {key: (jnp.stack(p), 3 * (key[1] // 3)) for key, p in preds.items()}
@@ -113,7 +129,7 @@ def merl_runs(names, sizes, fit, score):
     return out
 
 
-def merl_table(names, sizes):
+def merl_table(names, sizes, skew=()):
     fit = pj.data.load_merl_nbrdf(names, subsample=20000, seed=11)
     score = pj.data.load_merl_nbrdf(names, subsample=20000, seed=12)
     pub = {n: scores(score.values, published_predictions(n, names, score), score) for n in ("sgd", "abc")}
@@ -121,16 +137,30 @@ def merl_table(names, sizes):
     best_lg = np.minimum(pub["sgd"][1], pub["abc"][1])
     rows = ["| family | size | numbers | L2 median ratio | L2 better | L2 worst (material) | log median ratio | "
             "log better | log worst (material) | better on both |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for (family, size), (pred, n_num) in sorted(merl_runs(names, sizes, fit, score).items()):
-        l2, lg = scores(score.values, pred, score)
+    errors = {}
+    for (family, size), (pred, n_num) in sorted(merl_runs(names, sizes, fit, score, skew).items()):
+        l2, lg = errors[family, size] = scores(score.values, pred, score)
         r2, rl = l2 / best_l2, lg / best_lg
         rows.append(f"| {family} | {size} | {n_num} | {np.median(r2):.3f} | {np.sum(r2 < 1)} | {r2.max():.2f} "
                     f"({names[int(r2.argmax())]}) | {np.median(rl):.3f} | {np.sum(rl < 1)} | {rl.max():.2f} "
                     f"({names[int(rl.argmax())]}) | {np.sum((r2 < 1) & (rl < 1))} |")
-    return rows
+    return rows + skew_against_basis(errors)
 
 
-def rgl_table(sizes):
+def skew_against_basis(errors):
+    """Per material, each skew configuration's held-out errors over the basis family's at the same size."""
+    rows = ["", "| skew / basis (same size) | size | L2: median, max, materials better | "
+                "log: median, max, materials better |", "|---|---|---|---|"]
+    for (label, size), (l2, lg) in sorted(errors.items()):
+        if label.startswith("skew") and ("basis", size) in errors:
+            b2, blg = errors["basis", size]
+            r2, rl = l2 / b2, lg / blg
+            rows.append(f"| {label} | {size} | {np.median(r2):.3f}, {r2.max():.2f}, {np.sum(r2 < 1)} | "
+                        f"{np.median(rl):.3f}, {rl.max():.2f}, {np.sum(rl < 1)} |")
+    return rows if len(rows) > 4 else []
+
+
+def rgl_table(sizes, skew=()):
     root = pj.data_root()
     nets = pj.data.load_nbrdf(root / "nbrdf_sztrajman2021" / "rgl_two_nbrdf.zip")
     rows = ["| file | model | numbers | L2 | L2 / neural | log | log / neural |", "|---|---|---|---|---|---|---|"]
@@ -142,7 +172,7 @@ def rgl_table(sizes):
         nl2, nlg = scores(score.values, neural, score, score.mask)
         rows.append(f"| {name} | neural BRDF | 675 | {nl2:.4f} | 1 | {nlg:.4f} | 1 |")
         for size in sizes:
-            for label, (family, c) in configs(size, hybrids=True).items():
+            for label, (family, c) in configs(size, hybrids=True, skew=skew).items():
                 fam = COMPACT_FAMILIES[family]
                 p = fam.fit(c, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
                 l2, lg = scores(score.values, fam.evaluate(c, p, score.u, score.v), score, score.mask)
@@ -204,14 +234,17 @@ def main():
     ap.add_argument("--sizes", default=",".join(map(str, SIZES)))
     ap.add_argument("--merl-sizes", default=None, help="sizes of the MERL table (default --sizes)")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: merl, rgl, other, time")
+    ap.add_argument("--skew", default="", help="comma-separated numbers m of non-reciprocal rows of the skew family "
+                                               "to measure in the MERL and RGL tables (e.g. 1,3,8; none by default)")
     args = ap.parse_args()
+    skew = tuple(int(m) for m in args.skew.split(",") if m)
     sizes = [int(s) for s in args.sizes.split(",")]
     skip = set(args.skip.split(","))
     names = list(pj.data.MERL_NAMES[: args.materials])
     print(f"load average at start: {open('/proc/loadavg').read().split()[:3]}; devices {jax.devices()}", flush=True)
     t0 = time.perf_counter()
     merl_sizes = sizes if args.merl_sizes is None else [int(s) for s in args.merl_sizes.split(",")]
-    parts = (("merl", lambda: merl_table(names, merl_sizes)), ("rgl", lambda: rgl_table(sizes)),
+    parts = (("merl", lambda: merl_table(names, merl_sizes, skew)), ("rgl", lambda: rgl_table(sizes, skew)),
              ("other", lambda: other_table([s for s in sizes if s <= 33])), ("time", lambda: time_table(sizes)))
     for label, part in parts:
         if label not in skip:

@@ -23,7 +23,8 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   measuring or checking what a first call does);
 - compact models: :data:`COMPACT_FAMILIES` (the families of compact models, by name: ``configs``, ``n_numbers``,
   ``fit``, ``evaluate``), :class:`CompactBasisFamily` (the learned-basis family on a basis of one's own, e.g. one
-  learned without the material it fits), :func:`fit_compact_family` (one family's configuration fitted, no choice:
+  learned without the material it fits), :class:`CompactSkewFamily` (the same with a non-reciprocal part),
+  :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
@@ -42,6 +43,7 @@ from ._cache.memo import grid_memo
 from ._cache.programs import load_lapack_kernels, load_program, save_program
 from ._compact.families import FAMILIES as COMPACT_FAMILIES
 from ._compact.families import BasisFamily as CompactBasisFamily
+from ._compact.families import SkewBasisFamily as CompactSkewFamily
 from ._compact.fit import fit_compact_family
 from ._config import configured_data_root, data_file
 from ._files import check_output_path, make_cache_folder, write_atomically, write_bytes_atomically
@@ -66,5 +68,5 @@ __all__ = [
     "status_warnings",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
-    "COMPACT_FAMILIES", "CompactBasisFamily", "fit_compact_family",
+    "COMPACT_FAMILIES", "CompactBasisFamily", "CompactSkewFamily", "fit_compact_family",
 ]

@@ -112,6 +112,34 @@ def test_merl_grid_subsample_and_spec(data_root):
 
 
 @pytest.mark.data
+def test_cosine_convention_white_paper_albedo_and_near_reciprocity(data_root):
+    """The reference ``eval(wi, wo)`` is ``f cos theta_o`` with ``wi`` the view: ``load_rgl`` divides by the
+    light's cosine. Dividing by the view's instead (or swapping light and view) gives ``f`` times
+    ``(cos theta_v / cos theta_u)^{+-1}``. Two checks that would see it: the near-Lambertian white paper's albedo
+    ``int f(u, v) cos theta_u du`` is the same for every view (within 10 %; the other cosine makes it vary as
+    ``1 / cos theta_v``, 2.9x from 0 to 70 degrees), and ``log(f(u, v) / f(v, u))`` has no trend in
+    ``log(cos theta_u / cos theta_v)`` (slope near 0; the other cosine gives a slope of 2)."""
+    path = data_root / "rgl_epfl" / "paper_white_rgb.bsdf"
+    n_t, n_p = 60, 120  # midpoint rule over the light's hemisphere
+    t, p = np.meshgrid((np.arange(n_t) + 0.5) * (np.pi / 2) / n_t, (np.arange(n_p) + 0.5) * 2 * np.pi / n_p,
+                       indexing="ij")
+    u = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
+    dw = (np.sin(t) * (np.pi / 2 / n_t) * (2 * np.pi / n_p)).ravel()
+    views = np.deg2rad([0.0, 30.0, 50.0, 70.0])
+    v = np.concatenate([np.tile([np.sin(a), 0.0, np.cos(a)], (u.shape[0], 1)) for a in views])
+    f = np.asarray(pj.data.load_rgl(path, directions=(np.tile(u, (len(views), 1)), v)).values)
+    albedo = (f.reshape(3, len(views), -1) * (u[:, 2] * dw)).sum(-1)  # (3, views)
+    assert np.all((albedo > 0.7) & (albedo < 1.05)), albedo
+    assert np.all(albedo.max(1) / albedo.min(1) < 1.1), albedo
+    a, b = hemisphere(4000, 5, 0.1), hemisphere(4000, 6, 0.1)
+    fab = np.asarray(pj.data.load_rgl(path, directions=(a, b)).values).mean(0)
+    fba = np.asarray(pj.data.load_rgl(path, directions=(b, a)).values).mean(0)
+    x, y = np.log(a[:, 2] / b[:, 2]), np.log(fab / fba)
+    slope = float(x @ y / (x @ x))
+    assert abs(slope) < 0.3, slope
+
+
+@pytest.mark.data
 def test_export_to_merl_round_trip(data_root, tmp_path, capsys):
     """``polyjax export rgl:<name> --to merl``: read back by ``load_merl_binary``, the same values at the bin
     centres as ``load_rgl`` on the MERL grid."""

@@ -15,7 +15,8 @@ Families: ``basis`` (a principal-component basis of ``log(1 + f)`` learned from 
 degree ``d`` of the grid's coordinates, ``d = -1`` for none; :class:`BasisFamily` takes another basis, e.g. a
 leave-one-out one, and says which materials it was learned from in ``trained_on``), ``polynomial`` (the log-link,
 clamped polynomial; configurations ``(variables, degree, interactions)``, the fitted
-:class:`polyjax.PolynomialBRDF` as parameters).
+:class:`polyjax.PolynomialBRDF` as parameters), ``skew`` (the learned basis plus a non-reciprocal part, the first
+``m`` rows times ``cos(theta_u) - cos(theta_v)``; configurations ``(k, m)``: :class:`SkewBasisFamily`).
 
 No deviation from the protocol above. ``metric`` is ``"log"`` (the default: the basis fit weighs the log metric and,
 by ``basis.MIX_LOG``, equation (11)'s L2) or ``"l2"`` (the L2 alone). The fits are not jitted as a whole here (the
@@ -26,6 +27,7 @@ from typing import Hashable, Protocol
 
 from .basis import BasisFamily
 from .polynomial import PolynomialFamily
+from .skew import SkewBasisFamily
 
 
 class Family(Protocol):
@@ -42,6 +44,6 @@ class Family(Protocol):
     def evaluate(self, config, params, u, v): ...
 
 
-FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily())}
+FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily())}
 
-__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily"]
+__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily", "SkewBasisFamily"]

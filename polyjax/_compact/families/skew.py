@@ -1,0 +1,81 @@
+r"""The ``skew`` family: the learned basis with a non-reciprocal part, for measurements with ``f(u, v) != f(v, u)``.
+
+The basis family (``basis.py``) is reciprocal by construction: its rows are tabulated on the folded grid
+(``_grid.py``), the same for ``(u, v)`` and ``(v, u)``. Real measurements need not be: the RGL-EPFL files, evaluated
+as their authors' code evaluates them, differ from their swap by 0.7x (paper) and 1.6x (satin) the L2 error of a
+33-number basis fit (``benchmarks/RESULTS.md``). The model of one channel adds the first ``m`` basis rows times the
+odd factor ``t = cos(theta_u) - cos(theta_v)``:
+
+.. math::
+    g(u, v) = \sum_{j < k} c_j B_j(u, v) + t(u, v) \sum_{j < m} e_j B_j(u, v), \qquad
+    f(u, v) = \max\big(0, (\exp(\min(g, G_{max})) - 1) / K\big),
+
+so ``g(u, v) - g(v, u) = 2 t \sum_j e_j B_j``: the part of ``log(1 + K f)`` that changes sign under the swap, shaped
+like the material's own lobes (a peak where the basis has one) rather than like a low-degree polynomial. ``|t| <= 1``
+and the rows are bounded, so ``g`` is bounded by the coefficients at every direction above the horizon (and by
+``G_MAX``); ``f`` is never negative. ``3 (k + m)`` numbers per material.
+
+The fit is the basis family's, on the ``k + m`` columns: one linearised weighted solve, then ``basis.STEPS``
+Gauss-Newton steps on the log metric mixed with equation (11)'s L2 (QR, then the SVD of the triangle).
+
+Configurations ``(k, m)``: ``m`` in :data:`SKEW_ROWS` and, for each, only the largest ``k >= m`` within the budget
+(a handful of candidates per budget for the cross-validation, and the configuration of a saved model is found again
+among those of its own size).
+"""
+
+import jax.numpy as jnp
+import numpy as np
+
+from .basis import MIX_LOG, N_COMPONENTS, BasisFamily, _fit, _value
+
+#: the numbers of basis rows the non-reciprocal part may use
+SKEW_ROWS = (1, 2, 3, 5, 8, 13, 21)
+
+
+def skew_factor(u, v):
+    """``t = cos(theta_u) - cos(theta_v)`` ``(n,)``: odd under the swap of light and view, in ``[-1, 1]``."""
+    return jnp.clip(u[..., 2], 0.0, 1.0) - jnp.clip(v[..., 2], 0.0, 1.0)
+
+
+class SkewBasisFamily:
+    """The learned basis with a non-reciprocal part (module docstring); ``basis`` and ``trained_on`` as
+    :class:`BasisFamily` (default: the shipped basis)."""
+
+    name = "skew"
+
+    def __init__(self, basis=None, trained_on=None):
+        self._inner = BasisFamily(basis, trained_on)
+        self._rows = N_COMPONENTS if basis is None else int(np.shape(basis)[0])
+
+    @property
+    def trained_on(self) -> tuple[str, ...]:
+        return self._inner.trained_on
+
+    def configs(self, budget: int) -> list[tuple[int, int]]:
+        """``(k, m)``: for each ``m`` of :data:`SKEW_ROWS`, the largest ``k`` (``m <= k <=`` the basis rows) with
+        ``3 (k + m)`` at most ``budget``."""
+        out = []
+        for m in SKEW_ROWS:
+            k = min(budget // 3 - m, self._rows)
+            if k >= m:
+                out.append((k, m))
+        return out
+
+    def n_numbers(self, config) -> int:
+        k, m = config
+        return 3 * (int(k) + int(m))
+
+    def columns(self, config, u, v):
+        """``(n, k + m)``: the first ``k`` basis rows read at the directions, then the first ``m`` times ``t``."""
+        k, m = config
+        phi = self._inner.columns((k, -1), u, v)
+        return jnp.concatenate([phi, skew_factor(u, v)[:, None] * phi[:, :m]], -1)
+
+    def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
+        """Coefficients ``(*batch, 3, k + m)`` of ``values (*batch, 3, n)`` (module docstring)."""
+        mix = MIX_LOG if metric == "log" else None
+        return _fit(self.columns(config, u, v), u, v, jnp.asarray(values), weights, mask, mix)
+
+    def evaluate(self, config, params, u, v):
+        """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
+        return _value(jnp.einsum("nk,...k->...n", self.columns(config, u, v), params))
