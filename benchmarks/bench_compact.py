@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 import baselines as bl  # noqa: E402
 import polyjax as pj  # noqa: E402
 from polyjax._compact.families.basis import BasisFamily  # noqa: E402
-from polyjax._compact.select import cross_validate, fold_masks, rgb_errors  # noqa: E402
+from polyjax._compact.select import PEAK_LIMIT, cross_validate, fold_masks, rgb_errors  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import learn_compact_basis as lcb  # noqa: E402
@@ -74,8 +74,8 @@ def _cv(family, config, fit, i, held, family_object=None):
     fam = family_object or pj.compact_families()[family]
     key, arrays = fam.program(config)
     y, m = fit.values[i], jnp.broadcast_to(fit.mask, fit.values[i].shape)
-    params, _, lg = cross_validate(family, key, arrays, "log", fit.u, fit.v, y, fit.weights, m, held)
-    return params, float(lg)
+    params, _, lg, peak = cross_validate(family, key, arrays, "log", fit.u, fit.v, y, fit.weights, m, held)
+    return params, float(lg) if float(peak) <= PEAK_LIMIT else np.inf
 
 
 def _scored(family, config, fam, params, score):

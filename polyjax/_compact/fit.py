@@ -55,8 +55,10 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
     degree and its halvings, the polynomial's largest degree of each variable set) are fitted on ``folds - 1``
     folds of the samples and scored on the held-out fold, every fold and the refit on every sample in one program
     (``polyjax/_compact/select.py``; the basis family's configurations of one width share one compiled program);
-    the candidate of least held-out error in ``metric`` is returned, refitted on every sample. The choice follows one rule for every material; a batch of materials shares one choice (fit
-    materials one at a time for a choice of their own).
+    the candidate of least held-out error in ``metric`` is returned, refitted on every sample; a candidate whose
+    refit exceeds 10 times the largest measured value at a node of the grid is refused. The choice follows one
+    rule for every material; a batch of materials shares one choice (fit materials one at a time for a choice of
+    their own).
 
     Args:
         data: :class:`polyjax.Measurements` of RGB values ``(*batch, 3, n)``, directions ``(n, 3)``.

@@ -21,10 +21,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._metrics import _l2_core, _log_core
+from .families._grid import node_directions
 from .model import family_named
 
 #: the split's seed: the same folds for every material and every run
 FOLD_SEED = 0
+#: a candidate whose refit exceeds this many times the largest measured value at a node of the grid is refused
+PEAK_LIMIT = 10.0
+
+
+@functools.cache
+def _node_directions():
+    """Light and view directions of the folded grid's nodes (``families/_grid.py``) both above the horizon."""
+    u, v = node_directions()
+    keep = (u[:, 2] > 1e-6) & (v[:, 2] > 1e-6)
+    return u[keep], v[keep]
 
 
 def fold_ids(n: int, folds: int) -> np.ndarray:
@@ -55,8 +66,9 @@ def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights,
     fitted at once (``vmap``; ``held (K + 1, n)``, the last row the refit on every sample).
 
     Returns:
-        ``(params, l2, log)``: the refit's (padded) parameters and the held-out ``(l2, log)`` per material
-        ``(*batch,)``, each the root mean square over the ``K`` folds.
+        ``(params, l2, log, peak)``: the refit's (padded) parameters, the held-out ``(l2, log)`` per material
+        ``(*batch,)``, each the root mean square over the ``K`` folds, and the refit's largest value at the grid's
+        nodes over the largest measured value, per material.
     """
     mask = jnp.broadcast_to(mask, values.shape)
     family = family_named(family)
@@ -72,7 +84,14 @@ def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights,
 
     params, (l2, lg) = jax.vmap(one)(held)
     full = jax.tree.map(lambda a: a[-1], params)
-    return full, jnp.sqrt(jnp.mean(l2[:-1] ** 2, 0)), jnp.sqrt(jnp.mean(lg[:-1] ** 2, 0))
+    nu, nv = (jnp.asarray(a, values.dtype) for a in _node_directions())
+    if hasattr(family, "evaluate_program"):
+        at_nodes = family.evaluate_program(key, arrays, full, nu, nv)
+    else:
+        at_nodes = family.evaluate(key, full, nu, nv)
+    top = jnp.max(jnp.where(mask, values, 0.0), axis=(-2, -1))
+    peak = jnp.max(jnp.where(jnp.isfinite(at_nodes), at_nodes, jnp.inf), axis=(-2, -1)) / jnp.maximum(top, 1e-30)
+    return full, jnp.sqrt(jnp.mean(l2[:-1] ** 2, 0)), jnp.sqrt(jnp.mean(lg[:-1] ** 2, 0)), peak
 
 
 @functools.partial(jax.jit, static_argnames=("family", "config", "metric"))
@@ -102,14 +121,17 @@ def score(err) -> float:
 def choose(cands, metric: str, u, v, values, weights, mask, n_folds: int, family_objects=None):
     """Cross-validate every candidate (one compiled program per family's program key: the basis family's
     configurations of a width share one); the chosen ``(family, config)``, its refitted parameters and its
-    held-out ``(l2, log)``. ``family_objects`` maps names to family objects (default: the registered ones)."""
+    held-out ``(l2, log)``. A candidate whose refit exceeds :data:`PEAK_LIMIT` times the largest measured value
+    at a node of the grid (every direction pair the folded grid tabulates) is refused. ``family_objects`` maps
+    names to family objects (default: the registered ones)."""
     held = fold_masks(u.shape[-2], n_folds)
     best, best_score = None, np.inf
     for name, config in cands:
         fam = (family_objects or {}).get(name) or family_named(name)
         key, arrays = fam.program(config) if hasattr(fam, "program") else (config, ())
-        params, l2, lg = cross_validate(name, key, arrays, metric, u, v, values, weights, mask, held)
-        s = score(lg if metric == "log" else l2)
+        params, l2, lg, peak = cross_validate(name, key, arrays, metric, u, v, values, weights, mask, held)
+        # a blow-up where the samples are few (a poor small model near grazing) is refused, whatever its score
+        s = score(lg if metric == "log" else l2) if np.all(np.asarray(peak) <= PEAK_LIMIT) else np.inf
         if best is None or s < best_score:
             params = fam.unpad(config, params) if hasattr(fam, "unpad") else params
             best, best_score = ((name, config), params, (l2, lg)), s
