@@ -230,8 +230,9 @@ def baseline_rows(names, fit, score, chunk=50):
     for label, name in BASELINES.items():
         preds, ts = [], []
         for s in range(0, len(names), chunk):
-            sub = pj.Measurements(u=fit.u[:sub_n], v=fit.v[:sub_n], values=fit.values[s:s + chunk, :, :sub_n],
-                                  weights=fit.weights[:sub_n], mask=fit.mask[:sub_n], names=fit.names[s:s + chunk],
+            e = min(s + chunk, len(names))  # ``fit`` may hold more materials than ``names``
+            sub = pj.Measurements(u=fit.u[:sub_n], v=fit.v[:sub_n], values=fit.values[s:e, :, :sub_n],
+                                  weights=fit.weights[:sub_n], mask=fit.mask[:sub_n], names=fit.names[s:e],
                                   channels=fit.channels, axes=fit.axes, source=fit.source)
             t = time.perf_counter()
             f = bl.fit(name, sub, n_starts=16, key=key)
