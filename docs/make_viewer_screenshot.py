@@ -1,4 +1,5 @@
-"""Write ``docs/viewer.png``: the page of a polynomial fit against the neural MERL fit it was fitted to.
+"""Write ``docs/viewer.png``: the page of the compact fit (``pj.fit_compact``, 33 numbers) against the neural MERL
+fit it was fitted to.
 
     POLYJAX_DATA=<data root> PYTHONPATH=.:tests python docs/make_viewer_screenshot.py
 
@@ -22,9 +23,10 @@ NAME = "gold-metallic-paint"
 
 
 def main() -> int:
-    data = pj.data.load_merl_nbrdf(NAME, subsample=60000, seed=0)
-    fit = pj.fit_polynomial(data, variables="lafortune", degree=5)
-    items = [(f"polynomial p=5 ({NAME})", fit), (f"neural MERL fit ({NAME})", pj.data.load_nbrdf(NAME))]
+    data = pj.data.load_merl_nbrdf(NAME, subsample=20000, seed=0)
+    fit = pj.fit_compact(data, 33)
+    items = [(f"compact, {fit.n_numbers} numbers ({NAME})", fit),
+             (f"neural MERL fit ({NAME})", pj.data.load_nbrdf(NAME))]
     out = Path(__file__).with_name("viewer.png")
     with tempfile.TemporaryDirectory() as tmp:
         page = pj.view.write_page(items, Path(tmp) / "page.html", settings=pj.view.ViewSettings(size=160))

@@ -28,17 +28,38 @@ def merl():
 
 def test_configs_fit_the_budget_and_count_three_channels():
     for fam in COMPACT_FAMILIES.values():
-        for budget in (9, 16, 33):
+        for budget in (9, 16, 33, 64):
             configs = fam.configs(budget)
-            assert configs and all(fam.n_numbers(c) <= budget for c in configs)
+            assert all(fam.n_numbers(c) <= budget for c in configs)
+            assert set(fam.candidates(budget)) <= set(configs)
     basis, poly = COMPACT_FAMILIES["basis"], COMPACT_FAMILIES["polynomial"]
     assert (11, -1) in basis.configs(33) and (12, -1) not in basis.configs(33) and basis.n_numbers((11, -1)) == 33
     assert basis.n_numbers((7, 1)) == 33 and basis.n_numbers((1, 2)) == 33  # 4 and 10 polynomial terms
-    assert poly.n_numbers(("rusinkiewicz", 3, True)) == 30  # 10 terms per channel
-    assert ("rusinkiewicz", 4, True) not in poly.configs(33)
+    # the polynomial stores, per channel, its 10 coefficients and its components' mean (2), rotation (4), box
+    # centre (2) and half-widths (2): 20 numbers, 60 per material
+    assert poly.n_numbers(("rusinkiewicz", 3, True)) == 60
+    assert poly.configs(33) == [] and ("rusinkiewicz", 3, True) in poly.configs(64)
+    # the choice tries the largest k of each degree and its halvings, the largest degree of each variable set
+    assert basis.candidates(33)[:5] == [(11, -1), (6, -1), (3, -1), (2, -1), (1, -1)]
+    assert ("rusinkiewicz", 3, True) in poly.candidates(64) and ("rusinkiewicz", 2, True) not in poly.candidates(64)
     skew = COMPACT_FAMILIES["skew"]
     assert skew.configs(33) == [(10, 1), (9, 2), (8, 3), (6, 5)] and skew.n_numbers((8, 3)) == 33
     assert skew.configs(9) == [(2, 1)]
+
+
+def test_padded_program_fits_as_the_configuration_alone(merl):
+    """Every configuration of a width shares one compiled fit: zero columns padded, the same coefficients."""
+    fit = merl[0]
+    fam = COMPACT_FAMILIES["basis"]
+    for config in [(2, 1), (6, -1)]:
+        key, arrays = fam.program(config)
+        assert key == 8
+        padded = fam.fit_program(key, arrays, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+        alone = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+        assert np.allclose(np.asarray(fam.unpad(config, padded)), np.asarray(alone), rtol=1e-9, atol=1e-9)
+        assert np.all(np.asarray(padded)[..., 6:] == 0)  # both have 6 columns of their own
+        y_pad = fam.evaluate_program(key, arrays, padded, fit.u, fit.v)
+        assert np.allclose(np.asarray(y_pad), np.asarray(fam.evaluate(config, alone, fit.u, fit.v)), rtol=1e-9)
 
 
 @pytest.mark.slow  # three more fits compiled

@@ -50,11 +50,15 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
                 folds: int = 3) -> CompactBRDF:
     r"""The most accurate compact model of at most ``budget`` numbers per material, chosen by cross-validation.
 
-    Every configuration of every family (``polyjax/_compact/families``) that stores at most ``budget`` numbers per
-    material (all three channels counted) is fitted on ``folds - 1`` folds of the samples and scored on the
-    held-out fold (``polyjax/_compact/select.py``); the candidate of least held-out error in ``metric`` is refitted
-    on every sample. The choice follows one rule for every material; a batch of materials shares one choice (fit
-    materials one at a time for a choice of their own).
+    The candidates of every family (``polyjax/_compact/families``) that store at most ``budget`` numbers per
+    material (all three channels counted; each family's ``candidates``: the basis family's largest ``k`` of each
+    degree and its halvings, the polynomial's largest degree of each variable set) are fitted on ``folds - 1``
+    folds of the samples and scored on the held-out fold, every fold and the refit on every sample in one program
+    (``polyjax/_compact/select.py``; the basis family's configurations of one width share one compiled program);
+    the candidate of least held-out error in ``metric`` is returned, refitted on every sample; a candidate whose
+    refit exceeds 10 times the largest measured value at a node of the grid is refused. The choice follows one
+    rule for every material; a batch of materials shares one choice (fit materials one at a time for a choice of
+    their own).
 
     Args:
         data: :class:`polyjax.Measurements` of RGB values ``(*batch, 3, n)``, directions ``(n, 3)``.
@@ -85,8 +89,7 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
     if mask.ndim == values.ndim - 1:  # one mask per material: the same for its channels
         mask = mask[..., None, :]
     weights = jnp.asarray(data.weights)
-    (family, config), (l2, lg) = choose(cands, metric, u, v, values, weights, mask, int(folds))
-    params = refit(family, config, metric, u, v, values, weights, mask)
+    (family, config), params, (l2, lg) = choose(cands, metric, u, v, values, weights, mask, int(folds))
     return CompactBRDF(params=params, l2=l2, log=lg, family=family, config=config)
 
 

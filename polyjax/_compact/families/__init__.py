@@ -43,6 +43,13 @@ class Family(Protocol):
 
     def evaluate(self, config, params, u, v): ...
 
+    # optional (``polyjax/_compact/select.py`` falls back to ``configs``, ``fit`` and ``evaluate`` without them):
+    # ``candidates(budget)``, the configurations the choice tries (a thinned ``configs``); ``program(config)``,
+    # ``(key, arrays)``: a static key shared by configurations that share one compiled fit and the configuration's
+    # arrays (data); ``fit_program(key, arrays, u, v, values, weights, mask, metric)``,
+    # ``evaluate_program(key, arrays, params, u, v)`` and ``unpad(config, params)``, the shared program's fit,
+    # evaluation and the configuration's own parameters from its result.
+
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily())}
 

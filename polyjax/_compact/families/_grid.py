@@ -76,7 +76,11 @@ def interpolation(u, v, shape=SHAPE):
 def sample(table, u, v):
     """Table ``(k, prod(SHAPE))`` read at directions ``(n, 3)``: ``(n, k)``, trilinear."""
     idx, w = interpolation(u, v)
-    return jnp.einsum("nj,knj->nk", w, table[:, idx])
+    rows = jnp.asarray(table).T  # (nodes, k): each corner gathers whole rows, (n, k) at a time
+    out = w[:, 0, None] * rows[idx[:, 0]]
+    for j in range(1, idx.shape[-1]):
+        out = out + w[:, j, None] * rows[idx[:, j]]
+    return out
 
 
 def node_directions(shape=SHAPE):

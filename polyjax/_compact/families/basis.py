@@ -78,6 +78,19 @@ class BasisFamily:
         k, d = config
         return 3 * (int(k) + n_terms(d))
 
+    def candidates(self, budget: int) -> list[tuple[int, int]]:
+        """The configurations :func:`polyjax.fit_compact` tries within ``budget``: for each degree ``d`` the largest
+        ``k`` and its halvings (``k, ceil(k/2), ceil(k/4), .., 1``): the rows are nested, so a smaller ``k`` only
+        wins on little data, and the halvings find it at a few fits' cost."""
+        out = []
+        for d in DEGREES:
+            ks = [k for k, dd in self.configs(budget) if dd == d]
+            k = max(ks, default=0)
+            while k >= 1 and (k, d) not in out:
+                out.append((k, d))
+                k = (k + 1) // 2 if k > 1 else 0
+        return out
+
     def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
         """Coefficients ``(*batch, 3, k + terms)`` of ``values (*batch, 3, n)`` (module docstring)."""
         phi = self.columns(config, u, v)
@@ -85,8 +98,9 @@ class BasisFamily:
         return _fit(phi, u, v, jnp.asarray(values), weights, mask, mix)
 
     def evaluate(self, config, params, u, v):
-        """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
-        return _value(jnp.einsum("nk,...k->...n", self.columns(config, u, v), params))
+        """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``, bounded by the model's largest value at the
+        grid's nodes inside the 80-degree cutoff (:func:`bounded_value`)."""
+        return bounded_value(self.columns(config, u, v), self.node_columns(config), params)
 
     def columns(self, config, u, v):
         """``(n, k + terms)``: the basis rows read at the directions, then the Legendre terms of the coordinates."""
@@ -95,6 +109,65 @@ class BasisFamily:
         if d < 0:
             return phi
         return jnp.concatenate([phi, _legendre_terms(_grid.coordinates(u, v), d)], -1)
+
+    def node_columns(self, config):
+        """``(nodes, k + terms)``: the columns at the grid's nodes inside the 80-degree cutoff (the bound's nodes)."""
+        k, d = config
+        idx, coords = _inside_nodes()
+        rows = self.basis[:k][:, idx].T
+        if d < 0:
+            return rows
+        return jnp.concatenate([rows, _legendre_terms(tuple(jnp.asarray(c) for c in coords), d)], -1)
+
+    # the padded programs of the choice (polyjax/_compact/select.py): every configuration of ``width`` columns or
+    # fewer shares one compiled fit, its columns picked by index arrays (data, not static), padded with zeros
+
+    def program(self, config):
+        """``(key, arrays)``: the static key of the padded program (its width) and the configuration's index arrays
+        ``(table, rows, columns, valid)``: the basis table (data, so that another basis, e.g. a leave-one-out one,
+        shares the program) and, each ``(width,)``, the basis rows to read, the column of ``[rows | terms of degree
+        3]`` each padded column takes, and which are real (the rest are zero columns: their coefficients are 0)."""
+        k, d = config
+        active = k + n_terms(d)
+        width = next(w for w in WIDTHS if w >= active)
+        rows = np.zeros(width, np.int32)
+        rows[:k] = np.arange(k)
+        cols = np.zeros(width, np.int32)
+        cols[:k] = np.arange(k)
+        cols[k:active] = width + np.asarray(_term_positions(d), np.int32)
+        valid = np.arange(width) < active
+        return width, (self.basis, jnp.asarray(rows), jnp.asarray(cols), jnp.asarray(valid))
+
+    def fit_program(self, width, arrays, u, v, values, weights, mask, metric: str = "log"):
+        """The padded fit: coefficients ``(*batch, 3, width)`` (zero at the padding)."""
+        phi = self._padded(arrays, _grid.sample(arrays[0][arrays[1]], u, v), _legendre_terms(
+            _grid.coordinates(u, v), TERMS_MAX))
+        return _fit(phi, u, v, jnp.asarray(values), weights, mask, MIX_LOG if metric == "log" else None)
+
+    def evaluate_program(self, width, arrays, params, u, v):
+        """The padded model's values ``(*batch, 3, n)``."""
+        phi = self._padded(arrays, _grid.sample(arrays[0][arrays[1]], u, v), _legendre_terms(
+            _grid.coordinates(u, v), TERMS_MAX))
+        idx, coords = _inside_nodes()
+        nodes = self._padded(arrays, arrays[0][arrays[1]][:, idx].T,
+                             _legendre_terms(tuple(jnp.asarray(c) for c in coords), TERMS_MAX))
+        return bounded_value(phi, nodes, params)
+
+    def unpad(self, config, params):
+        """The configuration's own coefficients from the padded ones."""
+        k, d = config
+        return params[..., : k + n_terms(d)]
+
+    @staticmethod
+    def _padded(arrays, rows, terms):
+        _, _, cols, valid = arrays
+        return jnp.where(valid, jnp.concatenate([rows, terms], -1)[..., cols], 0.0)
+
+
+#: the widths of the padded programs (one compiled fit per width and data shape)
+WIDTHS = (4, 8, 12, 24, 48, 86, 128)
+#: the largest degree of the polynomial terms
+TERMS_MAX = 3
 
 
 def n_terms(d: int) -> int:
@@ -118,6 +191,39 @@ def _legendre_terms(coords, d):
 
 def _value(g):
     return jnp.maximum(jnp.expm1(jnp.minimum(g, G_MAX)) / K_TRANSFORM, 0.0)
+
+
+def bounded_value(phi, nodes, params):
+    r"""``f = max(0, expm1(min(g, g_max)) / K)``, ``g = phi c`` at the directions, ``g_max`` the largest ``g`` of
+    the model at the grid's nodes inside the 80-degree cutoff (``nodes (m, k)``): where the data weigh little
+    (grazing directions, where the log metric's ``cos theta_u`` vanishes) the model never exceeds its own value
+    where they weigh; computed from the coefficients (nothing stored). ``phi (n, k)``, ``params (*batch, k)``."""
+    g = jnp.einsum("nk,...k->...n", phi, params)
+    top = jnp.max(jnp.einsum("mk,...k->...m", nodes, params), -1, keepdims=True)
+    return _value(jnp.minimum(g, top))
+
+
+@functools.cache
+def _inside_nodes():
+    """The flat indices of the grid's nodes whose light and view directions are within 80 degrees of the normal,
+    and their unit coordinates ``(a, b, c)`` (numpy)."""
+    u, v = _grid.node_directions()
+    c = np.cos(np.radians(80.0))
+    idx = np.nonzero((u[:, 2] >= c) & (v[:, 2] >= c))[0]
+    axes = np.meshgrid(*(np.linspace(0.0, 1.0, n) for n in _grid.SHAPE), indexing="ij")
+    return idx, tuple(a.reshape(-1)[idx] for a in axes)
+
+
+@functools.cache
+def _term_positions(d: int) -> tuple[int, ...]:
+    """Positions of the terms of degree at most ``d`` (in :func:`_legendre_terms`' order) among those of degree
+    at most :data:`TERMS_MAX`."""
+    every = _exponents(TERMS_MAX)
+    return tuple(every.index(e) for e in _exponents(d)) if d >= 0 else ()
+
+
+def _exponents(d: int) -> list[tuple[int, int, int]]:
+    return [(i, j, m) for i in range(d + 1) for j in range(d + 1 - i) for m in range(d + 1 - i - j)]
 
 
 def _weights(u, v, values, weights, mask):

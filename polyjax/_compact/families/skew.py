@@ -61,6 +61,11 @@ class SkewBasisFamily:
                 out.append((k, m))
         return out
 
+    def candidates(self, budget: int) -> list[tuple[int, int]]:
+        """The configurations :func:`polyjax.fit_compact` tries within ``budget``: all of :meth:`configs` (one per
+        ``m``, at most four)."""
+        return self.configs(budget)
+
     def n_numbers(self, config) -> int:
         k, m = config
         return 3 * (int(k) + int(m))
