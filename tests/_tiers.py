@@ -58,6 +58,8 @@ SLOW_TESTS = frozenset({
     "test_mitsuba.py::test_roughplastic_brdf_equals_mitsuba_eval",  # 9 s
     "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts0]",  # 5 s
     "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts1]",  # 9 s
+    "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts2]",  # 9 s
+    "test_photometric.py::test_fit_derivative_wrt_images_matches_finite_differences[opts3]",  # 9 s
     "test_published.py::test_fit_recovers_synthetic_data[sgd]",  # 10 s
     "test_render.py::test_force_all_effects_gives_identical_pixels",  # 6 s
     "test_render.py::test_tabulated_brdf_is_reciprocal_and_interpolates",  # 10 s
