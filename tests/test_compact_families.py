@@ -44,7 +44,7 @@ def test_configs_fit_the_budget_and_count_three_channels():
     assert ("rusinkiewicz", 3, True) in poly.candidates(64) and ("rusinkiewicz", 2, True) not in poly.candidates(64)
     skew = COMPACT_FAMILIES["skew"]
     assert skew.configs(33) == [(10, 1), (9, 2), (8, 3), (6, 5)] and skew.n_numbers((8, 3)) == 33
-    assert skew.configs(9) == [(2, 1)]
+    assert skew.configs(9) == [] and skew.configs(21) == [(6, 1)]
 
 
 def test_padded_program_fits_as_the_configuration_alone(merl):

@@ -92,14 +92,21 @@ def read_png(path: str, bits: int | None = 16) -> np.ndarray:
         raise DataFormatError(path, f"a {bits}-bit PNG", f"{r.bitdepth} bits per channel")
     try:
         w, h, rows, info = r.asDirect()
-        data = np.array([np.asarray(r, dtype=np.uint16) for r in rows])
+        planes = int(info["planes"])
+        data = np.empty((h, w * planes), np.uint16)  # filled row by row: the pixels are held once
+        n = 0
+        for row in rows:
+            row = np.asarray(row, dtype=np.uint16)
+            if n >= h or row.shape != (w * planes,):
+                raise DataFormatError(path, f"{h} rows of {w * planes} values", f"row {n} of {row.shape[-1]} values")
+            data[n] = row
+            n += 1
     except _PNG_ERRORS as e:
         raise DataFormatError(path, "a readable PNG file", f"{e}") from None
     if bits is not None and info["bitdepth"] != bits:
         raise DataFormatError(path, f"a {bits}-bit PNG", f"{info['bitdepth']} bits per channel")
-    planes = int(info["planes"])
-    if data.shape != (h, w * planes):
-        raise DataFormatError(path, f"{h} rows of {w * planes} values", f"{data.shape}")
+    if n != h:
+        raise DataFormatError(path, f"{h} rows of {w * planes} values", f"{n} rows")
     return data.reshape(h, w, planes)[..., 0] if planes == 1 else data.reshape(h, w, planes)
 
 

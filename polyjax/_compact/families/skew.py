@@ -18,9 +18,9 @@ and the rows are bounded, so ``g`` is bounded by the coefficients at every direc
 The fit is the basis family's, on the ``k + m`` columns: one linearised weighted solve, then ``basis.STEPS``
 Gauss-Newton steps on the log metric mixed with equation (11)'s L2 (QR, then the SVD of the triangle).
 
-Configurations ``(k, m)``: ``m`` in :data:`SKEW_ROWS` and, for each, only the largest ``k >= m`` within the budget
-(a handful of candidates per budget for the cross-validation, and the configuration of a saved model is found again
-among those of its own size).
+Configurations ``(k, m)``: ``m`` in :data:`SKEW_ROWS` and, for each, only the largest ``k >= max(m, MIN_ROWS)``
+within the budget (a handful of candidates per budget for the cross-validation, and the configuration of a saved
+model is found again among those of its own size).
 """
 
 import jax.numpy as jnp
@@ -30,6 +30,8 @@ from .basis import MIX_LOG, N_COMPONENTS, BasisFamily, _fit, _value
 
 #: the numbers of basis rows the non-reciprocal part may use
 SKEW_ROWS = (1, 2, 3, 5, 8, 13, 21)
+#: the fewest symmetric basis rows the family offers beside its skew rows (:meth:`SkewBasisFamily.configs`)
+MIN_ROWS = 6
 
 
 def skew_factor(u, v):
@@ -52,12 +54,14 @@ class SkewBasisFamily:
         return self._inner.trained_on
 
     def configs(self, budget: int) -> list[tuple[int, int]]:
-        """``(k, m)``: for each ``m`` of :data:`SKEW_ROWS`, the largest ``k`` (``m <= k <=`` the basis rows) with
-        ``3 (k + m)`` at most ``budget``."""
+        """``(k, m)``: for each ``m`` of :data:`SKEW_ROWS`, the largest ``k`` (``max(m, MIN_ROWS) <= k <=`` the
+        basis rows) with ``3 (k + m)`` at most ``budget``. Below :data:`MIN_ROWS` symmetric rows the skew rows take
+        the numbers the shape needs: ``(2, 1)`` (9 numbers) reached 16x the data's maximum on gold-metallic-paint's
+        MERL grid (``tests/test_compact.py``'s sweep), so the family starts at 21 numbers."""
         out = []
         for m in SKEW_ROWS:
             k = min(budget // 3 - m, self._rows)
-            if k >= m:
+            if k >= max(m, MIN_ROWS):
                 out.append((k, m))
         return out
 
