@@ -174,11 +174,16 @@ def rgl_table(sizes, skew=()):
         for size in sizes:
             for label, (family, c) in configs(size, hybrids=True, skew=skew).items():
                 fam = COMPACT_FAMILIES[family]
-                p = fam.fit(c, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
-                l2, lg = scores(score.values, fam.evaluate(c, p, score.u, score.v), score, score.mask)
+                l2, lg = fit_and_score(fam, c, fit, score)
                 rows.append(f"| {name} | {label} {c} | {fam.n_numbers(c)} | {l2:.4f} | {l2 / nl2:.2f} | "
                             f"{lg:.4f} | {lg / nlg:.2f} |")
     return rows
+
+
+def fit_and_score(fam, config, fit, score):
+    """Both metrics (L2, log) on ``score`` of ``fam``'s ``config`` fitted for the log metric on ``fit``."""
+    p = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+    return scores(score.values, fam.evaluate(config, p, score.u, score.v), score, score.mask)
 
 
 def halves(d, seed=0):
@@ -205,8 +210,7 @@ def other_table(sizes):
         for size in sizes:
             for label_, (family, c) in configs(size, hybrids=True).items():
                 fam = COMPACT_FAMILIES[family]
-                p = fam.fit(c, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
-                l2, lg = scores(score.values, fam.evaluate(c, p, score.u, score.v), score, score.mask)
+                l2, lg = fit_and_score(fam, c, fit, score)
                 rows.append(f"| {label} | {label_} {c} | {fam.n_numbers(c)} | {np.median(lg):.4f} | "
                             f"{np.median(l2):.4f} |")
     return rows

@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
+
+from ._errors import InputError
 
 _EPS = 1e-12
 
@@ -103,3 +106,17 @@ def _cutoff_mask(u, v, cutoff_deg):
         tol = max(1e-9, 4 * float(jnp.finfo(dtype).eps)) if jnp.issubdtype(dtype, jnp.floating) else 1e-9
         keep = keep & (cu >= c - tol) & (cv >= c - tol)
     return keep
+
+
+def call_directions(u: ArrayLike, v: ArrayLike, dtype) -> tuple:
+    """A model call's directions checked before any work: ``(..., 3)`` each and broadcasting together (a JAX array,
+    traced or not, is kept; anything else becomes a numpy array of ``dtype``). Raises ``InputError`` naming
+    ``u, v`` otherwise."""
+    u, v = (a if isinstance(a, jax.Array) else np.asarray(a, dtype) for a in (u, v))
+    if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
+        raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
+    try:
+        np.broadcast_shapes(u.shape, v.shape)
+    except ValueError:
+        raise InputError(f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
+    return u, v

@@ -15,7 +15,7 @@ from numpy.polynomial import legendre, polynomial
 
 from ._arrays import is_traced
 from ._basis import BASES, design_matrix, exponents, n_terms
-from ._directions import safe_normalize
+from ._directions import call_directions, safe_normalize
 from ._errors import InputError
 from ._results import RESULTS
 from ._variables import get_variables
@@ -243,15 +243,7 @@ class PolynomialBRDF(eqx.Module):
             direction. The polynomial's values are not clamped and can be negative (:attr:`clamp` clamps its
             arguments to the fitted box).
         """
-        dtype = self.coefficients.dtype
-        u, v = (a if isinstance(a, jax.Array) else np.asarray(a, dtype) for a in (u, v))
-        if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
-            raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
-        try:
-            np.broadcast_shapes(u.shape, v.shape)
-        except ValueError:
-            raise InputError(
-                f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
+        u, v = call_directions(u, v, self.coefficients.dtype)
         return _evaluate(self, u, v)
 
     def paper_coefficients(self) -> np.ndarray:

@@ -46,6 +46,15 @@ def _check(data, budget, metric, families, folds) -> tuple[str, ...]:
     return names
 
 
+def _arrays(data: Measurements) -> tuple:
+    """``(u, v, values, weights, mask)`` of ``data`` as JAX arrays, one mask per material given to its three
+    channels."""
+    mask = jnp.asarray(data.mask)
+    if mask.ndim == data.values.ndim - 1:
+        mask = mask[..., None, :]
+    return jnp.asarray(data.u), jnp.asarray(data.v), jnp.asarray(data.values), jnp.asarray(data.weights), mask
+
+
 def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str = "log", families=None,
                 folds: int = 3) -> CompactBRDF:
     r"""The most accurate compact model of at most ``budget`` numbers per material, chosen by cross-validation.
@@ -83,12 +92,7 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
                     for n in names}
         raise BudgetError(f"budget: {budget} numbers per material admits no model of the families {list(names)} "
                           f"(the smallest need {smallest})")
-    u, v = jnp.asarray(data.u), jnp.asarray(data.v)
-    values = jnp.asarray(data.values)
-    mask = jnp.asarray(data.mask)
-    if mask.ndim == values.ndim - 1:  # one mask per material: the same for its channels
-        mask = mask[..., None, :]
-    weights = jnp.asarray(data.weights)
+    u, v, values, weights, mask = _arrays(data)
     (family, config), params, (l2, lg) = choose(cands, metric, u, v, values, weights, mask, int(folds))
     return CompactBRDF(params=params, l2=l2, log=lg, family=family, config=config)
 
@@ -103,10 +107,6 @@ def fit_compact_family(data: Measurements, family: str, config, *, metric: str =
     """One family's configuration fitted on every sample of ``data``, no choice (``l2``/``log`` NaN): the
     benchmarks' and tests' way to a given model."""
     _check(data, family_named(family).n_numbers(config), metric, family, 2)
-    mask = jnp.asarray(data.mask)
-    if mask.ndim == data.values.ndim - 1:
-        mask = mask[..., None, :]
-    params = refit(family, config, metric, jnp.asarray(data.u), jnp.asarray(data.v), jnp.asarray(data.values),
-                   jnp.asarray(data.weights), mask)
+    params = refit(family, config, metric, *_arrays(data))
     nan = jnp.full(data.values.shape[:-2], jnp.nan)
     return CompactBRDF(params=params, l2=nan, log=nan, family=family, config=config)

@@ -14,11 +14,10 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._directions import safe_normalize
-from .._errors import InputError, UnknownNameError
+from .._directions import call_directions, safe_normalize
+from .._errors import UnknownNameError
 from .._model import _from_key, _index_key
 from .families import FAMILIES
 
@@ -89,15 +88,7 @@ class CompactBRDF(eqx.Module):
         Returns:
             ``(*batch, 3, ...)`` RGB values in 1/sr; 0 where ``u`` or ``v`` is below the horizon.
         """
-        dtype = jax.tree.leaves(self.params)[0].dtype
-        u, v = (a if isinstance(a, jax.Array) else np.asarray(a, dtype) for a in (u, v))
-        if u.ndim < 1 or v.ndim < 1 or u.shape[-1] != 3 or v.shape[-1] != 3:
-            raise InputError(f"u, v: expected directions of shape (..., 3), found {u.shape} and {v.shape}")
-        try:
-            np.broadcast_shapes(u.shape, v.shape)
-        except ValueError:
-            raise InputError(
-                f"u and v: expected shapes that broadcast together, found {u.shape} and {v.shape}") from None
+        u, v = call_directions(u, v, jax.tree.leaves(self.params)[0].dtype)
         return _evaluate(self, u, v)
 
 
