@@ -2,14 +2,18 @@ r"""The front door of compact fits: :func:`fit_compact`, the most accurate model
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Mapping
+from typing import Any, NamedTuple
+
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import InputError, UnknownNameError
 from .._measurements import Measurements
+from .._solve.threads import one_lapack_thread
 from .families import FAMILIES
 from .model import CompactBRDF, family_named
-from .select import candidates, choose, refit
+from .select import candidate_chains, choose, refit
 
 METRICS = ("log", "l2")
 #: the default budget of numbers per material (the size of the published SGD fits)
@@ -55,19 +59,21 @@ def _arrays(data: Measurements) -> tuple:
     return jnp.asarray(data.u), jnp.asarray(data.v), jnp.asarray(data.values), jnp.asarray(data.weights), mask
 
 
+@one_lapack_thread
 def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str = "log", families=None,
                 folds: int = 3) -> CompactBRDF:
     r"""The most accurate compact model of at most ``budget`` numbers per material, chosen by cross-validation.
 
     The candidates of every family (``polyjax/_compact/families``) that store at most ``budget`` numbers per
-    material (all three channels counted; each family's ``candidates``: the basis family's largest ``k`` of each
-    degree and its halvings, the polynomial's largest degree of each variable set) are fitted on ``folds - 1``
-    folds of the samples and scored on the held-out fold, every fold and the refit on every sample in one program
-    (``polyjax/_compact/select.py``; the basis family's configurations of one width share one compiled program);
-    the candidate of least held-out error in ``metric`` is returned, refitted on every sample; a candidate whose
-    refit exceeds 10 times the largest measured value at a node of the grid is refused. The choice follows one
-    rule for every material; a batch of materials shares one choice (fit materials one at a time for a choice of
-    their own).
+    material (all three channels counted) are fitted on ``folds - 1`` folds of the samples and scored on the
+    held-out fold, every fold in one program (``polyjax/_compact/select.py``; the basis family's configurations
+    of one width share one compiled program). They come in chains (the basis family's largest ``k`` of each
+    degree, then its halvings; the skew family's configurations in order of skew rows; each of the polynomial's
+    largest degrees of a variable set alone): the first of every chain is tried, then the chain of the best of
+    them is walked while the held-out error falls. The candidate of least held-out error in ``metric`` is
+    returned, refitted on every sample; a candidate whose refit exceeds 10 times the largest measured value at a
+    node of the grid is refused (the next one is refitted). The choice follows one rule for every material; a
+    batch of materials shares one choice (fit materials one at a time for a choice of their own).
 
     Args:
         data: :class:`polyjax.Measurements` of RGB values ``(*batch, 3, n)``, directions ``(n, 3)``.
@@ -85,16 +91,48 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
         BudgetError: no configuration of the families asked for fits within ``budget`` (names the smallest).
         UnknownNameError: a family name that is not registered.
     """
+    choice = _choose(data, budget, metric, families, folds, None)
+    return CompactBRDF(params=choice.params, l2=choice.l2, log=choice.log, family=choice.family,
+                       config=choice.config)
+
+
+class Choice(NamedTuple):
+    """:func:`choose_compact`'s result: the chosen family's name and configuration, its parameters refitted on
+    every sample, its held-out errors ``(*batch,)`` and the number of candidates cross-validated."""
+
+    family: str
+    config: Hashable
+    params: Any
+    l2: Any
+    log: Any
+    tried: int
+
+
+@one_lapack_thread
+def choose_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, families: Mapping, metric: str = "log",
+                   folds: int = 3) -> Choice:
+    """:func:`fit_compact`'s choice among family objects of one's own: ``families`` maps registered family names
+    to family objects (e.g. ``{"basis": CompactBasisFamily(loo_basis), "skew": CompactSkewFamily(loo_basis)}``,
+    a basis learned without the material fitted). The result's parameters are the given family object's
+    (evaluate them with its ``evaluate``: a :class:`CompactBRDF` evaluates with the registered families)."""
+    if not isinstance(families, Mapping):
+        raise InputError(f"families: expected a mapping of family names to family objects, found "
+                         f"{type(families).__name__}")
+    return _choose(data, budget, metric, tuple(families), folds, dict(families))
+
+
+def _choose(data, budget, metric, families, folds, objects) -> Choice:
     names = _check(data, budget, metric, families, folds)
-    cands = candidates(names, int(budget))
-    if not cands:
+    chains = candidate_chains(names, int(budget), objects)
+    if not chains:
         smallest = {n: min((family_named(n).n_numbers(c) for c in family_named(n).configs(10 ** 9)), default=None)
                     for n in names}
         raise BudgetError(f"budget: {budget} numbers per material admits no model of the families {list(names)} "
                           f"(the smallest need {smallest})")
     u, v, values, weights, mask = _arrays(data)
-    (family, config), params, (l2, lg) = choose(cands, metric, u, v, values, weights, mask, int(folds))
-    return CompactBRDF(params=params, l2=l2, log=lg, family=family, config=config)
+    (family, config), params, (l2, lg), tried = choose(chains, metric, u, v, values, weights, mask, int(folds),
+                                                      objects)
+    return Choice(family, config, params, l2, lg, tried)
 
 
 def compact_families() -> dict:
@@ -103,6 +141,7 @@ def compact_families() -> dict:
     return dict(FAMILIES)
 
 
+@one_lapack_thread
 def fit_compact_family(data: Measurements, family: str, config, *, metric: str = "log") -> CompactBRDF:
     """One family's configuration fitted on every sample of ``data``, no choice (``l2``/``log`` NaN): the
     benchmarks' and tests' way to a given model."""

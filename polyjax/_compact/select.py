@@ -22,6 +22,7 @@ import numpy as np
 
 from .._metrics import _l2_core, _log_core
 from .families._grid import node_directions
+from .families.basis import MIX_LOG, fit_folds
 from .model import family_named
 
 #: the split's seed: the same folds for every material and every run
@@ -54,44 +55,68 @@ def rgb_errors(values, predicted, u, v, weights, mask):
 
 
 def fold_masks(n: int, folds: int) -> jax.Array:
-    """``(folds + 1, n)``: True for the samples each fold holds out; the last row holds none out (the refit)."""
+    """``(folds, n)``: True for the samples each fold holds out."""
     ids = fold_ids(n, folds)
-    return jnp.asarray(np.concatenate([ids[None, :] == np.arange(folds)[:, None], np.zeros((1, n), bool)]))
+    return jnp.asarray(ids[None, :] == np.arange(folds)[:, None])
+
+
+def fold_parts(n: int, folds: int) -> tuple:
+    """The folds as index arrays (:func:`polyjax._compact.families.basis.fit_folds`): ``(parts, part_ok, train,
+    train_ok)``, each fold's samples ``(K, m)`` and the samples it is fitted on ``(K, (K - 1) m)``, padded (with
+    sample 0, ``ok`` False) to equal lengths."""
+    ids = fold_ids(n, folds)
+
+    def padded(sets):
+        m = max(len(x) for x in sets)
+        idx = np.zeros((len(sets), m), np.int32)
+        ok = np.zeros((len(sets), m), bool)
+        for j, x in enumerate(sets):
+            idx[j, : len(x)], ok[j, : len(x)] = x, True
+        return jnp.asarray(idx), jnp.asarray(ok)
+
+    parts = padded([np.nonzero(ids == j)[0] for j in range(folds)])
+    train = padded([np.nonzero(ids != j)[0] for j in range(folds)])
+    return parts + train
 
 
 @functools.partial(jax.jit, static_argnames=("family", "key", "metric"))
-def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights, mask, held):
-    """One candidate's padded program (``program(config)`` of the family named ``family``: its static ``key``, its
-    ``arrays``, data), every fold
-    fitted at once (``vmap``; ``held (K + 1, n)``, the last row the refit on every sample).
+def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights, mask, held, parts):
+    """One candidate's held-out errors: its program (``program(config)`` of the family named ``family``: its static
+    ``key``, its ``arrays``) fitted on every fold's training samples at once (``held (K, n)`` the samples each
+    fold holds out; ``parts``, :func:`fold_parts`) and scored on the held-out ones.
+
+    A family with columns (``design``, ``from_design``: ``basis``, ``skew``) is fitted by
+    :func:`polyjax._compact.families.basis.fit_folds` on its columns computed once; another by its own padded fit
+    per fold, the held-out samples masked out.
 
     Returns:
-        ``(params, l2, log, peak)``: the refit's (padded) parameters, the held-out ``(l2, log)`` per material
-        ``(*batch,)``, each the root mean square over the ``K`` folds, and the refit's largest value at the grid's
-        nodes over the largest measured value, per material.
+        ``(l2, log)`` per material ``(*batch,)``, each the root mean square over the ``K`` folds.
     """
     mask = jnp.broadcast_to(mask, values.shape)
-    family = family_named(family)
-
-    def one(h):
-        if hasattr(family, "fit_program"):
-            params = family.fit_program(key, arrays, u, v, values, weights, mask & ~h, metric)
-            pred = family.evaluate_program(key, arrays, params, u, v)
-        else:  # a family without padded programs: its own fit per configuration (``key`` is the configuration)
-            params = family.fit(key, u, v, values, weights, mask & ~h, metric)
-            pred = family.evaluate(key, params, u, v)
-        return params, rgb_errors(values, pred, u, v, weights, mask & h)
-
-    params, (l2, lg) = jax.vmap(one)(held)
-    full = jax.tree.map(lambda a: a[-1], params)
-    nu, nv = (jnp.asarray(a, values.dtype) for a in _node_directions())
-    if hasattr(family, "evaluate_program"):
-        at_nodes = family.evaluate_program(key, arrays, full, nu, nv)
+    fam = family_named(family)
+    if hasattr(fam, "design"):
+        phi = fam.design(key, arrays, u, v)
+        coef = fit_folds(phi, u, v, values, weights, mask, *parts, MIX_LOG if metric == "log" else None)
+        pred = jax.vmap(lambda c: fam.from_design(key, arrays, phi, c), in_axes=-2)(coef)
     else:
-        at_nodes = family.evaluate(key, full, nu, nv)
+        pred = jax.vmap(lambda h: fam.evaluate_program(key, arrays, fam.fit_program(
+            key, arrays, u, v, values, weights, mask & ~h, metric), u, v))(held)
+    l2, lg = jax.vmap(lambda p, h: rgb_errors(values, p, u, v, weights, mask & h))(pred, held)
+    return jnp.sqrt(jnp.mean(l2 ** 2, 0)), jnp.sqrt(jnp.mean(lg ** 2, 0))
+
+
+@functools.partial(jax.jit, static_argnames=("family", "key", "metric"))
+def refit_peak(family: str, key, arrays, metric: str, u, v, values, weights, mask):
+    """The candidate's program fitted on every sample: its (padded) parameters and its largest value at the grid's
+    nodes over the largest measured value, per material ``(*batch,)``."""
+    mask = jnp.broadcast_to(mask, values.shape)
+    fam = family_named(family)
+    params = fam.fit_program(key, arrays, u, v, values, weights, mask, metric)
+    nu, nv = (jnp.asarray(a, values.dtype) for a in _node_directions())
+    at_nodes = fam.evaluate_program(key, arrays, params, nu, nv)
     top = jnp.max(jnp.where(mask, values, 0.0), axis=(-2, -1))
     peak = jnp.max(jnp.where(jnp.isfinite(at_nodes), at_nodes, jnp.inf), axis=(-2, -1)) / jnp.maximum(top, 1e-30)
-    return full, jnp.sqrt(jnp.mean(l2[:-1] ** 2, 0)), jnp.sqrt(jnp.mean(lg[:-1] ** 2, 0)), peak
+    return params, peak
 
 
 @functools.partial(jax.jit, static_argnames=("family", "config", "metric"))
@@ -101,15 +126,25 @@ def refit(family: str, config, metric: str, u, v, values, weights, mask):
     return family_named(family).fit(config, u, v, values, weights, mask, metric)
 
 
-def candidates(families, budget: int) -> list[tuple[str, object]]:
-    """The ``(family, config)`` the choice tries within ``budget`` numbers per material (each family's
-    ``candidates``: its configurations of at most ``budget`` numbers, thinned to bound the fits)."""
+def candidate_chains(families, budget: int, family_objects=None) -> list[list[tuple[str, object]]]:
+    """The chains of ``(family, config)`` the choice walks within ``budget`` numbers per material (each family's
+    ``candidate_chains``, else each of its ``candidates`` (or ``configs``) a chain of its own; ``family_objects``
+    as :func:`choose`): a chain is walked in order while the held-out error falls."""
     out = []
     for name in families:
-        fam = family_named(name)
-        thinned = fam.candidates(budget) if hasattr(fam, "candidates") else fam.configs(budget)
-        out += [(name, c) for c in thinned if fam.n_numbers(c) <= budget]
+        fam = (family_objects or {}).get(name) or family_named(name)
+        if hasattr(fam, "candidate_chains"):
+            chains = fam.candidate_chains(budget)
+        else:
+            chains = [[c] for c in (fam.candidates(budget) if hasattr(fam, "candidates") else fam.configs(budget))]
+        chains = [[(name, c) for c in chain if fam.n_numbers(c) <= budget] for chain in chains]
+        out += [chain for chain in chains if chain]
     return out
+
+
+def candidates(families, budget: int) -> list[tuple[str, object]]:
+    """Every ``(family, config)`` the choice may try within ``budget`` (:func:`candidate_chains`, flattened)."""
+    return [c for chain in candidate_chains(families, budget) for c in chain]
 
 
 def score(err) -> float:
@@ -118,21 +153,43 @@ def score(err) -> float:
     return float(np.exp(np.mean(np.log(np.maximum(err, 1e-300))))) if np.all(np.isfinite(err)) else np.inf
 
 
-def choose(cands, metric: str, u, v, values, weights, mask, n_folds: int, family_objects=None):
-    """Cross-validate every candidate (one compiled program per family's program key: the basis family's
-    configurations of a width share one); the chosen ``(family, config)``, its refitted parameters and its
-    held-out ``(l2, log)``. A candidate whose refit exceeds :data:`PEAK_LIMIT` times the largest measured value
-    at a node of the grid (every direction pair the folded grid tabulates) is refused. ``family_objects`` maps
-    names to family objects (default: the registered ones)."""
+def choose(chains, metric: str, u, v, values, weights, mask, n_folds: int, family_objects=None):
+    """The choice, a greedy search: cross-validate the first candidate of every chain (:func:`candidate_chains`),
+    then walk the chain of the best of them while its held-out error falls (the next candidate while it beats the
+    best so far); refit the candidates on every sample in order of held-out error and return the first whose
+    refit stays within :data:`PEAK_LIMIT` times the largest measured value at every node of the grid (every
+    direction pair the folded grid tabulates): a blow-up where the samples are few is refused whatever its score
+    (when none stays within it, the least held-out error's). ``family_objects`` maps names to family objects
+    (default: the registered ones; e.g. a basis learned without the material).
+
+    Returns:
+        ``((family, config), params, (l2, log), tried)``: the choice, its refitted parameters, its held-out errors
+        ``(*batch,)`` and the number of candidates cross-validated.
+    """
     held = fold_masks(u.shape[-2], n_folds)
-    best, best_score = None, np.inf
-    for name, config in cands:
+    parts = fold_parts(u.shape[-2], n_folds)
+    scored = []
+
+    def trial(name, config):
         fam = (family_objects or {}).get(name) or family_named(name)
         key, arrays = fam.program(config) if hasattr(fam, "program") else (config, ())
-        params, l2, lg, peak = cross_validate(name, key, arrays, metric, u, v, values, weights, mask, held)
-        # a blow-up where the samples are few (a poor small model near grazing) is refused, whatever its score
-        s = score(lg if metric == "log" else l2) if np.all(np.asarray(peak) <= PEAK_LIMIT) else np.inf
-        if best is None or s < best_score:
-            params = fam.unpad(config, params) if hasattr(fam, "unpad") else params
-            best, best_score = ((name, config), params, (l2, lg)), s
-    return best
+        l2, lg = cross_validate(name, key, arrays, metric, u, v, values, weights, mask, held, parts)
+        scored.append((score(lg if metric == "log" else l2), len(scored), name, config, fam, key, arrays, (l2, lg)))
+        return scored[-1][0]
+
+    heads = [trial(*chain[0]) for chain in chains]
+    lead = int(np.argmin(heads))
+    best = heads[lead]
+    for name, config in chains[lead][1:] if np.isfinite(best) else ():
+        s = trial(name, config)
+        if not s < best:
+            break
+        best = s
+    first = None
+    for _s, _, name, config, fam, key, arrays, errs in sorted(scored, key=lambda t: t[:2]):
+        params, peak = refit_peak(name, key, arrays, metric, u, v, values, weights, mask)
+        unpad = fam.unpad(config, params) if hasattr(fam, "unpad") else params
+        first = first or ((name, config), unpad, errs, len(scored))
+        if np.all(np.asarray(peak) <= PEAK_LIMIT):
+            return (name, config), unpad, errs, len(scored)
+    return first

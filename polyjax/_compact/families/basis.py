@@ -38,6 +38,8 @@ N_COMPONENTS = 86
 #: largest ``g`` the model evaluates (``f`` at most ``(exp(G_MAX) - 1) / K``, 1e5 1/sr)
 G_MAX = float(np.log1p(K_TRANSFORM * 1e5))
 STEPS = 2
+#: the step lengths each Gauss-Newton step tries (besides staying where it is)
+STEP_LENGTHS = (1.0, 0.5, 0.25)
 #: the degrees of the polynomial terms a configuration may add (-1: none)
 DEGREES = (-1, 1, 2, 3)
 MIX_LOG = 3.0
@@ -51,6 +53,12 @@ def shipped_basis():
         return np.asarray(z["basis"], np.float64), tuple(str(n) for n in z["materials"])
 
 
+@functools.cache
+def _device_basis(x64: bool):
+    """The shipped basis as a JAX array (once per precision mode: float64 with x64 enabled, else float32)."""
+    return jnp.asarray(shipped_basis()[0])
+
+
 class BasisFamily:
     """The learned-basis family (module docstring); ``basis`` ``(k_max, nodes)`` (default: the shipped one) and the
     names of the materials it was learned from (``trained_on``: a material's benchmark uses a basis without it)."""
@@ -62,7 +70,9 @@ class BasisFamily:
 
     @property
     def basis(self):
-        return jnp.asarray(shipped_basis()[0] if self._basis is None else self._basis)
+        if self._basis is None:
+            return _device_basis(jax.config.jax_enable_x64)
+        return jnp.asarray(self._basis)
 
     @property
     def trained_on(self) -> tuple[str, ...]:
@@ -79,16 +89,24 @@ class BasisFamily:
         return 3 * (int(k) + n_terms(d))
 
     def candidates(self, budget: int) -> list[tuple[int, int]]:
-        """The configurations :func:`polyjax.fit_compact` tries within ``budget``: for each degree ``d`` the largest
-        ``k`` and its halvings (``k, ceil(k/2), ceil(k/4), .., 1``): the rows are nested, so a smaller ``k`` only
-        wins on little data, and the halvings find it at a few fits' cost."""
-        out = []
+        """The configurations :func:`polyjax.fit_compact` may try within ``budget``: :meth:`candidate_chains`,
+        flattened."""
+        return [c for chain in self.candidate_chains(budget) for c in chain]
+
+    def candidate_chains(self, budget: int) -> list[list[tuple[int, int]]]:
+        """For each degree ``d`` the largest ``k`` and its halvings (``k, ceil(k/2), ceil(k/4), .., 1``), largest
+        first: the rows are nested, so a smaller ``k`` only wins on little data; the choice walks a chain while
+        the held-out error falls (``polyjax/_compact/select.py``)."""
+        out, seen = [], set()
         for d in DEGREES:
             ks = [k for k, dd in self.configs(budget) if dd == d]
-            k = max(ks, default=0)
-            while k >= 1 and (k, d) not in out:
-                out.append((k, d))
+            k, chain = max(ks, default=0), []
+            while k >= 1 and (k, d) not in seen:
+                chain.append((k, d))
+                seen.add((k, d))
                 k = (k + 1) // 2 if k > 1 else 0
+            if chain:
+                out.append(chain)
         return out
 
     def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
@@ -138,20 +156,27 @@ class BasisFamily:
         valid = np.arange(width) < active
         return width, (self.basis, jnp.asarray(rows), jnp.asarray(cols), jnp.asarray(valid))
 
-    def fit_program(self, width, arrays, u, v, values, weights, mask, metric: str = "log"):
-        """The padded fit: coefficients ``(*batch, 3, width)`` (zero at the padding)."""
-        phi = self._padded(arrays, _grid.sample(arrays[0][arrays[1]], u, v), _legendre_terms(
+    def design(self, width, arrays, u, v):
+        """The padded program's columns ``(n, width)`` at directions ``(n, 3)`` (zero at the padding)."""
+        return self._padded(arrays, _grid.sample(arrays[0][arrays[1]], u, v), _legendre_terms(
             _grid.coordinates(u, v), TERMS_MAX))
-        return _fit(phi, u, v, jnp.asarray(values), weights, mask, MIX_LOG if metric == "log" else None)
 
-    def evaluate_program(self, width, arrays, params, u, v):
-        """The padded model's values ``(*batch, 3, n)``."""
-        phi = self._padded(arrays, _grid.sample(arrays[0][arrays[1]], u, v), _legendre_terms(
-            _grid.coordinates(u, v), TERMS_MAX))
+    def from_design(self, width, arrays, phi, params):
+        """The padded model's values ``(*batch, 3, n)`` from its columns ``phi (n, width)`` (bounded as
+        :func:`bounded_value`)."""
         idx, coords = _inside_nodes()
         nodes = self._padded(arrays, arrays[0][arrays[1]][:, idx].T,
                              _legendre_terms(tuple(jnp.asarray(c) for c in coords), TERMS_MAX))
         return bounded_value(phi, nodes, params)
+
+    def fit_program(self, width, arrays, u, v, values, weights, mask, metric: str = "log"):
+        """The padded fit: coefficients ``(*batch, 3, width)`` (zero at the padding)."""
+        return _fit(self.design(width, arrays, u, v), u, v, jnp.asarray(values), weights, mask,
+                    MIX_LOG if metric == "log" else None)
+
+    def evaluate_program(self, width, arrays, params, u, v):
+        """The padded model's values ``(*batch, 3, n)``."""
+        return self.from_design(width, arrays, self.design(width, arrays, u, v), params)
 
     def unpad(self, config, params):
         """The configuration's own coefficients from the padded ones."""
@@ -251,38 +276,97 @@ def _lstsq(a, y):
     return jnp.linalg.lstsq(r[:k, :k], r[:k, k], rcond=1e-12)[0]
 
 
-def _fit_lane(phi, cu, b, w, wc, *, mix):
+def _initial(phi, cu, b, w):
+    """Step 1's weighted least-squares problem ``(A, y)``: the log metric linearised in ``g`` (module docstring)."""
     jac = cu * (1 + K_TRANSFORM * b) / (K_TRANSFORM * (1 + b * cu))
     s = jnp.sqrt(w) * jac
-    c = _lstsq(phi * s[:, None], s * jnp.log1p(K_TRANSFORM * b))
+    return phi * s[:, None], s * jnp.log1p(K_TRANSFORM * b)
+
+
+def _fit_lane(phi, cu, b, w, wc, *, mix):
+    return _refine(phi, cu, b, w, wc, _lstsq(*_initial(phi, cu, b, w)), mix=mix)
+
+
+def _refine(phi, cu, b, w, wc, c, *, mix):
+    """Step 2: :data:`STEPS` Gauss-Newton steps from ``c`` (module docstring), each trying the step lengths
+    :data:`STEP_LENGTHS` and keeping the best of them and of staying. ``g = phi c`` and its residuals are carried with
+    ``c``: a step costs one QR, one product ``phi delta`` and the trials' residuals (their transcendental
+    functions are most of a step's time)."""
     target = jnp.log1p(b * cu)
+    sw, swc = jnp.sqrt(w), jnp.sqrt(wc)
 
-    def errors(c):
-        f = _value(phi @ c)
-        r_log = jnp.sqrt(w) * (jnp.log1p(f * cu) - target)
-        r_2 = jnp.sqrt(wc) * cu * (f - b)
-        return f, r_log, r_2
+    def errors(g):
+        f = _value(g)
+        return f, sw * (jnp.log1p(f * cu) - target), swc * cu * (f - b)
 
-    _, r_log0, r_20 = errors(c)
+    g0 = phi @ c
+    f0, r_log0, r_20 = errors(g0)
     s_log = jnp.sqrt(jnp.sum(r_log0**2)) + 1e-30
     s_2 = jnp.sqrt(jnp.sum(r_20**2)) + 1e-30
     a_log, a_2 = (1.0, 0.0) if mix is None else (1.0, jnp.sqrt(mix))
     a_log, a_2 = (0.0, 1.0) if mix is None else (a_log, a_2)
 
-    def objective(c):
-        _, r_log, r_2 = errors(c)
-        return (a_log / s_log) ** 2 * jnp.sum(r_log**2) + (a_2 / s_2) ** 2 * jnp.sum(r_2**2)
+    def objective(r_log, r_2):
+        return (a_log / s_log) ** 2 * jnp.sum(r_log**2, -1) + (a_2 / s_2) ** 2 * jnp.sum(r_2**2, -1)
 
-    def step(c, _):
-        f, r_log, r_2 = errors(c)
-        df = jnp.where(f > 0, jnp.exp(jnp.minimum(phi @ c, G_MAX)) / K_TRANSFORM, 0.0)
-        d_log = (a_log / s_log) * jnp.sqrt(w) * cu * df / (1 + f * cu)
-        d_2 = (a_2 / s_2) * jnp.sqrt(wc) * cu * df
+    def step(carry, _):
+        c, g, f, r_log, r_2, obj = carry
+        df = jnp.where(f > 0, f + 1.0 / K_TRANSFORM, 0.0)  # d f / d g = exp(min(g, G_MAX)) / K where f > 0
+        d_log = (a_log / s_log) * sw * cu * df / (1 + f * cu)
+        d_2 = (a_2 / s_2) * swc * cu * df
         q = jnp.sqrt(d_log**2 + d_2**2)  # one row per sample: the stacked rows' Gauss-Newton step, n rows not 2n
         t = -((a_log / s_log) * d_log * r_log + (a_2 / s_2) * d_2 * r_2) / jnp.where(q > 0, q, 1.0)
         delta = _lstsq(phi * q[:, None], t)
-        trials = c + jnp.array([1.0, 0.5, 0.25, 0.125, 0.0])[:, None] * delta
-        best = jnp.argmin(jax.vmap(objective)(trials))
-        return trials[best], None
+        alphas = jnp.asarray(STEP_LENGTHS, g.dtype)
+        g_t = g + alphas[:, None] * (phi @ delta)
+        f_t, r_log_t, r_2_t = errors(g_t)
+        objs = jnp.append(objective(r_log_t, r_2_t), obj)
+        i = jnp.argmin(objs)
+        pick = lambda trial, now: jnp.concatenate([trial, now[None]])[i]  # noqa: E731
+        alpha = jnp.append(alphas, 0.0)[i]
+        return (c + alpha * delta, pick(g_t, g), pick(f_t, f), pick(r_log_t, r_log), pick(r_2_t, r_2), objs[i]), None
 
-    return jax.lax.scan(step, c, None, length=STEPS)[0]
+    start = (c, g0, f0, r_log0, r_20, objective(r_log0, r_20))
+    return jax.lax.scan(step, start, None, length=STEPS)[0][0]
+
+
+@functools.partial(jax.jit, static_argnames=("mix",))
+def fit_folds(phi, u, v, values, weights, mask, parts, part_ok, train, train_ok, mix):
+    r"""Every fold's fit of the cross-validation at once, each on the other folds' samples: coefficients
+    ``(*batch, 3, K, k)`` of ``values (*batch, 3, n)`` on the design ``phi (n, k)``, equal to :func:`_fit` with the
+    fold's samples masked out (to rounding) at a fraction of its cost.
+
+    Step 1's weights do not depend on the fit, so its least-squares problems share one factorisation: the triangle
+    ``R_j`` of each fold's weighted rows ``[A_j, y_j]`` (``K`` QRs of ``n / K`` rows), and fold ``j``'s problem is
+    the QR of the stacked triangles of the other folds (``[A, y]`` over their rows has the same ``R``, up to signs:
+    the TSQR of Demmel et al. 2012). Step 2's Gauss-Newton steps weigh the rows by the fold's own fit, so each is
+    solved on the fold's training rows alone (gathered, ``(K - 1) n / K`` of them), not on all ``n`` with zero
+    weights.
+
+    Args:
+        parts: ``(K, m)`` the samples of each fold (indices, padded where ``part_ok`` is False);
+        train: ``(K, (K - 1) m)`` the samples each fold is fitted on, padded where ``train_ok`` is False.
+    """
+    b = jnp.maximum(values, 0.0)
+    w, wc = _weights(u, v, values, weights, mask)
+    cu = jnp.maximum(u[:, 2], 0.0)
+    lane = jnp.vectorize(functools.partial(_fold_lanes, phi, cu, parts, part_ok, train, train_ok, mix=mix),
+                         signature="(n),(n),(n)->(f,k)")
+    return lane(b, w, wc)
+
+
+def _fold_lanes(phi, cu, parts, part_ok, train, train_ok, b, w, wc, *, mix):
+    k, n_folds = phi.shape[-1], parts.shape[0]
+    a, y = _initial(phi, cu, b, w)
+    ay = jnp.concatenate([a, y[:, None]], -1)
+    tri = jax.vmap(lambda idx, ok: jnp.linalg.qr(jnp.where(ok[:, None], ay[idx], 0.0), mode="r"))(parts, part_ok)
+    others = np.array([[i for i in range(n_folds) if i != j] for j in range(n_folds)])
+    stacked = tri[others].reshape(n_folds, -1, k + 1)  # (K, (K - 1)(k + 1), k + 1)
+    r = jnp.linalg.qr(stacked, mode="r")
+    c0 = jax.vmap(lambda t: jnp.linalg.lstsq(t[:k, :k], t[:k, k], rcond=1e-12)[0])(r)
+
+    def one(c, idx, ok):
+        return _refine(phi[idx], cu[idx], b[idx], jnp.where(ok, w[idx], 0.0), jnp.where(ok, wc[idx], 0.0), c,
+                       mix=mix)
+
+    return jax.vmap(one)(c0, train, train_ok)

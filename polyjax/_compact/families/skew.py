@@ -26,6 +26,7 @@ model is found again among those of its own size).
 import jax.numpy as jnp
 import numpy as np
 
+from . import _grid
 from .basis import MIX_LOG, N_COMPONENTS, BasisFamily, _fit, _value
 
 #: the numbers of basis rows the non-reciprocal part may use
@@ -70,21 +71,49 @@ class SkewBasisFamily:
         ``m``, at most four)."""
         return self.configs(budget)
 
+    def candidate_chains(self, budget: int) -> list[list[tuple[int, int]]]:
+        """One chain, :meth:`configs` in order of ``m``: the choice adds skew rows (taking them from the symmetric
+        part) while the held-out error falls (``polyjax/_compact/select.py``)."""
+        return [self.configs(budget)] if self.configs(budget) else []
+
     def n_numbers(self, config) -> int:
         k, m = config
         return 3 * (int(k) + int(m))
 
     def columns(self, config, u, v):
         """``(n, k + m)``: the first ``k`` basis rows read at the directions, then the first ``m`` times ``t``."""
-        k, m = config
-        phi = self._inner.columns((k, -1), u, v)
-        return jnp.concatenate([phi, skew_factor(u, v)[:, None] * phi[:, :m]], -1)
+        return self.design(config, self.program(config)[1], u, v)
 
     def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
         """Coefficients ``(*batch, 3, k + m)`` of ``values (*batch, 3, n)`` (module docstring)."""
-        mix = MIX_LOG if metric == "log" else None
-        return _fit(self.columns(config, u, v), u, v, jnp.asarray(values), weights, mask, mix)
+        return self.fit_program(config, self.program(config)[1], u, v, values, weights, mask, metric)
 
     def evaluate(self, config, params, u, v):
         """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
-        return _value(jnp.einsum("nk,...k->...n", self.columns(config, u, v), params))
+        return self.evaluate_program(config, self.program(config)[1], params, u, v)
+
+    # the choice's program interface (polyjax/_compact/select.py): one program per configuration, the basis table
+    # passed as data (so that another basis, e.g. a leave-one-out one, is the one fitted)
+
+    def program(self, config):
+        return config, (self._inner.basis,)
+
+    def design(self, config, arrays, u, v):
+        """``(n, k + m)``: :meth:`columns` of the basis table ``arrays[0]``."""
+        k, m = config
+        phi = _grid.sample(arrays[0][:k], u, v)
+        return jnp.concatenate([phi, skew_factor(u, v)[:, None] * phi[:, :m]], -1)
+
+    def from_design(self, config, arrays, phi, params):
+        return _value(jnp.einsum("nk,...k->...n", phi, params))
+
+    def fit_program(self, config, arrays, u, v, values, weights, mask, metric: str = "log"):
+        mix = MIX_LOG if metric == "log" else None
+        return _fit(self.design(config, arrays, u, v), u, v, jnp.asarray(values), weights, mask, mix)
+
+    def evaluate_program(self, config, arrays, params, u, v):
+        return self.from_design(config, arrays, self.design(config, arrays, u, v), params)
+
+    def unpad(self, config, params):
+        return params
+
