@@ -26,7 +26,8 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   learned without the material it fits), :class:`CompactSkewFamily` (the same with a non-reciprocal part),
   :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks), :func:`choose_compact` (:func:`polyjax.fit_compact`'s choice among family objects of one's
-  own, e.g. a basis learned without the material; a :class:`CompactChoice`);
+  own, e.g. a basis learned without the material; a :class:`CompactChoice`), :func:`compact_fold_ids` (the
+  fold of each sample in its cross-validation);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
   :func:`save_program`, :func:`load_program` (a fitter keeping its compiled executable beside the compilation cache,
@@ -47,6 +48,7 @@ from ._compact.families import BasisFamily as CompactBasisFamily
 from ._compact.families import SkewBasisFamily as CompactSkewFamily
 from ._compact.fit import Choice as CompactChoice
 from ._compact.fit import choose_compact, fit_compact_family
+from ._compact.select import fold_ids as compact_fold_ids
 from ._config import configured_data_root, data_file
 from ._files import check_output_path, make_cache_folder, write_atomically, write_bytes_atomically
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
@@ -71,5 +73,5 @@ __all__ = [
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
     "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSkewFamily", "choose_compact",
-    "fit_compact_family",
+    "compact_fold_ids", "fit_compact_family",
 ]

@@ -8,7 +8,7 @@ import pytest
 
 import polyjax as pj
 from benchmarks.learn_compact_basis import learn
-from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily
+from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily, choose_compact, compact_fold_ids
 
 MATERIALS = ("chrome", "white-paint")
 
@@ -130,3 +130,27 @@ def test_leave_one_out_basis_excludes_the_material():
     assert np.allclose(basis[0], np.log1p(tables[[0, 1, 3]]).reshape(-1, 50).mean(0))
     shipped = COMPACT_FAMILIES["basis"].trained_on
     assert len(shipped) == 100 and set(shipped) == set(pj.data.MERL_NAMES)
+
+
+@pytest.mark.parametrize("family,budget", [("basis", 3), ("skew", 21)])
+def test_cross_validation_scores_each_fold_fitted_without_it(merl, family, budget):
+    """The choice's held-out errors (every fold fitted at once from shared factorisations) are those of the
+    family's own fit on the other folds' samples, scored on the fold's: the root mean square over the folds."""
+    fit = merl[0][0]
+    fam = COMPACT_FAMILIES[family]
+    (config,) = [c for chain in fam.candidate_chains(budget) for c in chain][:1]
+    ch = choose_compact(fit, budget, families={family: fam})
+    assert (ch.family, ch.config, ch.tried) == (family, config, 1)
+    ids = compact_fold_ids(fit.n_samples, 3)
+    l2s, logs = [], []
+    for k in range(3):
+        params = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask & (ids != k), "log")
+        pred = fam.evaluate(config, params, fit.u, fit.v)
+        held = fit.mask & (ids == k)
+        for out, metric in ((l2s, pj.l2_error), (logs, pj.log_error)):
+            per_channel = np.asarray(metric(fit.values, pred, fit.u, fit.v, fit.weights, mask=held))
+            out.append(np.sqrt(np.mean(per_channel ** 2)))
+    assert float(ch.l2) == pytest.approx(np.sqrt(np.mean(np.square(l2s))), rel=1e-8)
+    assert float(ch.log) == pytest.approx(np.sqrt(np.mean(np.square(logs))), rel=1e-8)
+    whole = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+    assert np.allclose(np.asarray(ch.params), np.asarray(whole), rtol=1e-9, atol=1e-12)

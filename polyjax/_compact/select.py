@@ -10,6 +10,11 @@ material and every run). For each candidate ``(family, config)`` every fold is f
 with ``phi`` the L2 of equation (11) (80-degree cutoff) or the log metric of :func:`polyjax.log_error` (every bin
 above the horizon). The same rule chooses for every material: the candidate of least held-out error in the
 metric asked for; a batch of materials shares one choice, the least geometric mean of ``E`` over the batch.
+
+Not every candidate is fitted (:func:`choose`): the families give them in chains (the basis family's halvings of
+``k``, the skew family's growing skew rows); the first of every chain is cross-validated, then the chain of the
+best of them is walked while ``E`` falls. On 20 MERL materials at 33 numbers this greedy search chose what the
+exhaustive one does on all 20, cross-validating 5-6 of the 14 candidates.
 """
 
 from __future__ import annotations
