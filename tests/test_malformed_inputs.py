@@ -21,7 +21,7 @@ import scipy.io
 
 import polyjax as pj
 
-from _fuzz_problems import peak_bytes, small_model, write_nbrdf_zip, write_scene
+from _fuzz_problems import peak_bytes, small_model, write_diligent, write_nbrdf_zip, write_scene
 from _rgl_problems import rgl_fields, write_tensor_file
 
 MiB = 2**20
@@ -78,6 +78,21 @@ def test_mask_png_declaring_more_pixels_than_the_cap_is_refused_before_decoding(
     assert isinstance(out, pj.DataFormatError), out
     assert "mask.png" in str(out) and "POLYJAX_MAX_INPUT_MB" in str(out) and "4096 x 4096" in str(out)
     assert peak < 2 * MiB
+
+
+def test_first_image_with_a_huge_header_chunk_length_is_refused_without_allocating_it(tmp_path):
+    """A flipped bit of the first image's ``IHDR`` length (byte 8: 13 becomes 64 MiB + 13) is a named error before
+    anything of that size is allocated (the bit-depth probe once read it from the file object, which allocates the
+    whole chunk: 64 MiB for this 200-byte file, 2 GiB for bit 7)."""
+    folder = write_diligent(tmp_path / "objPNG")
+    pj.data.load_photometric(str(folder))
+    raw = bytearray((folder / "001.png").read_bytes())
+    raw[8] ^= 1 << 2
+    (folder / "001.png").write_bytes(bytes(raw))
+    out, peak = peak_bytes(pj.data.load_photometric, str(folder))
+    assert isinstance(out, pj.DataFormatError), out
+    assert "001.png" in str(out) and "IHDR" in str(out)
+    assert peak < MiB
 
 
 def test_png_declaring_more_pixels_than_its_bytes_can_hold_is_refused_before_decoding(tmp_path):

@@ -362,14 +362,10 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
 
 def _bit_depth(path: str) -> int:
     """The bit depth of the first image (16 or 8; every image must share it). Raises
-    :class:`polyjax.DataFormatError` naming the file for another depth."""
-    try:
-        with open(path, "rb") as fh:
-            r = png.Reader(file=fh)
-            r.preamble()
-            bits = int(r.bitdepth)
-    except (png.Error, ValueError, OSError, EOFError) as e:
-        raise DataFormatError(path, "a readable PNG file", f"{e}") from None
+    :class:`polyjax.DataFormatError` naming the file for another depth. The header is read as
+    :func:`check_png_header` reads it (from memory): pypng reading a file object asks it for a whole chunk at once,
+    and a damaged chunk length (a flipped bit of ``IHDR``'s) made it allocate up to 2 GiB for a file of 200 bytes."""
+    bits = int(_png_reader(path, header_only=True).bitdepth)
     if bits not in (8, 16):
         raise DataFormatError(path, "a 16-bit or 8-bit PNG (linear camera values)", f"{bits} bits per channel")
     return bits
