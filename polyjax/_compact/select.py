@@ -28,7 +28,7 @@ import numpy as np
 
 from .._metrics import _l2_core, _log_core
 from .families._grid import node_directions
-from .families.basis import MIX_LOG, fit_folds
+from .families.basis import fit_folds, mix_for
 from .model import family_named
 
 #: the split's seed: the same folds for every material and every run
@@ -45,11 +45,14 @@ def _node_directions():
     return u[keep], v[keep]
 
 
+@functools.cache
 def fold_ids(n: int, folds: int) -> np.ndarray:
-    """``(n,)`` the fold of each sample: a fixed random permutation's position modulo ``folds``."""
+    """``(n,)`` the fold of each sample: a fixed random permutation's position modulo ``folds`` (computed once per
+    ``(n, folds)``; read-only)."""
     perm = np.random.default_rng(FOLD_SEED).permutation(n)
     ids = np.empty(n, np.int32)
     ids[perm] = np.arange(n) % folds
+    ids.flags.writeable = False
     return ids
 
 
@@ -102,7 +105,7 @@ def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights,
     fam = family_named(family)
     if hasattr(fam, "design"):
         phi = fam.design(key, arrays, u, v)
-        coef = fit_folds(phi, u, v, values, weights, mask, *parts, MIX_LOG if metric == "log" else None)
+        coef = fit_folds(phi, u, v, values, weights, mask, *parts, mix_for(metric))
         pred = jax.vmap(lambda c: fam.from_design(key, arrays, phi, c), in_axes=-2)(coef)
     else:
         pred = jax.vmap(lambda h: fam.evaluate_program(key, arrays, fam.fit_program(
@@ -178,7 +181,7 @@ def choose(chains, metric: str, u, v, values, weights, mask, n_folds: int, famil
 
     def trial(name, config):
         fam = (family_objects or {}).get(name) or family_named(name)
-        key, arrays = fam.program(config) if hasattr(fam, "program") else (config, ())
+        key, arrays = fam.program(config)
         l2, lg = cross_validate(name, key, arrays, metric, u, v, values, weights, mask, held, parts)
         scored.append((score(lg if metric == "log" else l2), len(scored), name, config, fam, key, arrays, (l2, lg)))
         return scored[-1][0]
@@ -194,7 +197,7 @@ def choose(chains, metric: str, u, v, values, weights, mask, n_folds: int, famil
     first = None
     for _s, _, name, config, fam, key, arrays, errs in sorted(scored, key=lambda t: t[:2]):
         params, peak = refit_peak(name, key, arrays, metric, u, v, values, weights, mask)
-        unpad = fam.unpad(config, params) if hasattr(fam, "unpad") else params
+        unpad = fam.unpad(config, params)
         first = first or ((name, config), unpad, errs, len(scored))
         if np.all(np.asarray(peak) <= PEAK_LIMIT):
             return (name, config), unpad, errs, len(scored)

@@ -43,15 +43,17 @@ class Family(Protocol):
 
     def evaluate(self, config, params, u, v): ...
 
-    # optional (``polyjax/_compact/select.py`` falls back to ``configs``, ``fit`` and ``evaluate`` without them):
-    # ``candidates(budget)``, the configurations the choice may try (a thinned ``configs``);
-    # ``candidate_chains(budget)``, the same as lists walked in order while the held-out error falls (largest
-    # first); ``design(key, arrays, u, v)`` and ``from_design(key, arrays, phi, params)``, the program's columns
-    # and its values from them (the choice then fits every fold from shared factorisations); ``program(config)``,
-    # ``(key, arrays)``: a static key shared by configurations that share one compiled fit and the configuration's
-    # arrays (data); ``fit_program(key, arrays, u, v, values, weights, mask, metric)``,
-    # ``evaluate_program(key, arrays, params, u, v)`` and ``unpad(config, params)``, the shared program's fit,
-    # evaluation and the configuration's own parameters from its result.
+    # what the choice calls (``polyjax/_compact/select.py``): ``program(config)``, ``(key, arrays)``: a static key
+    # shared by configurations that share one compiled fit and the configuration's arrays (data);
+    # ``fit_program(key, arrays, u, v, values, weights, mask, metric)``, ``evaluate_program(key, arrays, params, u,
+    # v)`` and ``unpad(config, params)``, the shared program's fit, evaluation and the configuration's own
+    # parameters from its result (a family without shared programs: ``program(config) = (config, ())`` and the
+    # other three its own ``fit``, ``evaluate`` and the identity).
+    # optional: ``candidates(budget)``, the configurations the choice may try (a thinned ``configs``; else
+    # ``configs``); ``candidate_chains(budget)``, the same as lists walked in order while the held-out error falls
+    # (else each candidate alone); ``design(key, arrays, u, v)`` and ``from_design(key, arrays, phi, params)``,
+    # the program's columns and its values from them (the choice then fits every fold from shared
+    # factorisations; else each fold by ``fit_program`` with its held-out samples masked out).
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily())}

@@ -43,6 +43,12 @@ STEP_LENGTHS = (1.0, 0.5, 0.25)
 #: the degrees of the polynomial terms a configuration may add (-1: none)
 DEGREES = (-1, 1, 2, 3)
 MIX_LOG = 3.0
+
+
+def mix_for(metric: str):
+    """The weight of equation (11)'s L2 in the Gauss-Newton objective for ``metric`` (module docstring):
+    :data:`MIX_LOG` for ``"log"``, None (the L2 alone) for ``"l2"``."""
+    return MIX_LOG if metric == "log" else None
 _DATA = Path(__file__).parents[1] / "data" / "basis.npz"
 
 
@@ -112,8 +118,7 @@ class BasisFamily:
     def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
         """Coefficients ``(*batch, 3, k + terms)`` of ``values (*batch, 3, n)`` (module docstring)."""
         phi = self.columns(config, u, v)
-        mix = MIX_LOG if metric == "log" else None
-        return _fit(phi, u, v, jnp.asarray(values), weights, mask, mix)
+        return _fit(phi, u, v, jnp.asarray(values), weights, mask, mix_for(metric))
 
     def evaluate(self, config, params, u, v):
         """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``, bounded by the model's largest value at the
@@ -171,8 +176,7 @@ class BasisFamily:
 
     def fit_program(self, width, arrays, u, v, values, weights, mask, metric: str = "log"):
         """The padded fit: coefficients ``(*batch, 3, width)`` (zero at the padding)."""
-        return _fit(self.design(width, arrays, u, v), u, v, jnp.asarray(values), weights, mask,
-                    MIX_LOG if metric == "log" else None)
+        return _fit(self.design(width, arrays, u, v), u, v, jnp.asarray(values), weights, mask, mix_for(metric))
 
     def evaluate_program(self, width, arrays, params, u, v):
         """The padded model's values ``(*batch, 3, n)``."""

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _grid
-from .basis import MIX_LOG, N_COMPONENTS, BasisFamily, _fit, _value
+from .basis import N_COMPONENTS, BasisFamily, _fit, _value, mix_for
 
 #: the numbers of basis rows the non-reciprocal part may use
 SKEW_ROWS = (1, 2, 3, 5, 8, 13, 21)
@@ -109,8 +109,7 @@ class SkewBasisFamily:
         return _value(jnp.einsum("nk,...k->...n", phi, params))
 
     def fit_program(self, config, arrays, u, v, values, weights, mask, metric: str = "log"):
-        mix = MIX_LOG if metric == "log" else None
-        return _fit(self.design(config, arrays, u, v), u, v, jnp.asarray(values), weights, mask, mix)
+        return _fit(self.design(config, arrays, u, v), u, v, jnp.asarray(values), weights, mask, mix_for(metric))
 
     def evaluate_program(self, config, arrays, params, u, v):
         return self.from_design(config, arrays, self.design(config, arrays, u, v), params)
