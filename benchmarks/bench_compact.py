@@ -48,13 +48,15 @@ import baselines as bl  # noqa: E402
 import polyjax as pj  # noqa: E402
 from polyjax._compact.select import rgb_errors  # noqa: E402
 from polyjax.internal import CompactBasisFamily as BasisFamily  # noqa: E402
+from polyjax.internal import CompactSharedFamily as SharedShapeFamily  # noqa: E402
 from polyjax.internal import CompactSkewFamily as SkewBasisFamily  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import learn_compact_basis as lcb  # noqa: E402
 
 BUDGETS = (9, 16, 33, 64, 128, 256)
-FAMILY_SETS = {"compact": ("basis", "skew", "polynomial"), "basis": ("basis",), "skew": ("skew",),
+FAMILY_SETS = {"compact": ("basis", "skew", "polynomial", "shared"), "basis": ("basis",), "skew": ("skew",),
+               "shared": ("shared",),
                "polynomial": ("polynomial",)}
 BASELINES = {"cook-torrance": "cook-torrance", "ward": "ward", "glTF PBR (standard)": "gltf-pbr"}
 PUBLISHED = {"published SGD": ("sgd", 33), "published ABC": ("abc", 9)}
@@ -70,6 +72,7 @@ def loo_families(name, tables, mass, names_all):
     """The families of the choice for material ``name``: ``basis`` and ``skew`` on a basis learned without it."""
     basis = lcb.learn(tables, mass, names_all, exclude=[name])[0]
     return {"basis": BasisFamily(basis=basis), "skew": SkewBasisFamily(basis=basis),
+            "shared": SharedShapeFamily(basis=basis),
             "polynomial": pj.compact_families()["polynomial"]}
 
 

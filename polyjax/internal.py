@@ -24,6 +24,7 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
 - compact models: :data:`COMPACT_FAMILIES` (the families of compact models, by name: ``configs``, ``n_numbers``,
   ``fit``, ``evaluate``), :class:`CompactBasisFamily` (the learned-basis family on a basis of one's own, e.g. one
   learned without the material it fits), :class:`CompactSkewFamily` (the same with a non-reciprocal part),
+  :class:`CompactSharedFamily` (one shape for the three channels on such a basis),
   :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks), :func:`choose_compact` (:func:`polyjax.fit_compact`'s choice among family objects of one's
   own, e.g. a basis learned without the material; a :class:`CompactChoice`), :func:`compact_fold_ids` (the
@@ -45,6 +46,7 @@ from ._cache.memo import grid_memo
 from ._cache.programs import load_lapack_kernels, load_program, save_program
 from ._compact.families import FAMILIES as COMPACT_FAMILIES
 from ._compact.families import BasisFamily as CompactBasisFamily
+from ._compact.families import SharedShapeFamily as CompactSharedFamily
 from ._compact.families import SkewBasisFamily as CompactSkewFamily
 from ._compact.fit import Choice as CompactChoice
 from ._compact.fit import choose_compact, fit_compact_family
@@ -72,6 +74,7 @@ __all__ = [
     "status_warnings",
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
-    "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSkewFamily", "choose_compact",
+    "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSharedFamily", "CompactSkewFamily",
+    "choose_compact",
     "compact_fold_ids", "fit_compact_family",
 ]

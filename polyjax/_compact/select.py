@@ -95,8 +95,8 @@ def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights,
     fold holds out; ``parts``, :func:`fold_parts`) and scored on the held-out ones.
 
     A family with columns (``design``, ``from_design``: ``basis``, ``skew``) is fitted by
-    :func:`polyjax._compact.families.basis.fit_folds` on its columns computed once; another by its own padded fit
-    per fold, the held-out samples masked out.
+    :func:`polyjax._compact.families.basis.fit_folds` on its columns computed once; one with its own fold fits
+    (``fit_folds``: ``shared``) by them; another by its own padded fit per fold, the held-out samples masked out.
 
     Returns:
         ``(l2, log)`` per material ``(*batch,)``, each the root mean square over the ``K`` folds.
@@ -107,6 +107,9 @@ def cross_validate(family: str, key, arrays, metric: str, u, v, values, weights,
         phi = fam.design(key, arrays, u, v)
         coef = fit_folds(phi, u, v, values, weights, mask, *parts, mix_for(metric))
         pred = jax.vmap(lambda c: fam.from_design(key, arrays, phi, c), in_axes=-2)(coef)
+    elif hasattr(fam, "fit_folds"):
+        coef = fam.fit_folds(key, arrays, u, v, values, weights, mask, held, parts, metric)
+        pred = jax.vmap(lambda c: fam.evaluate_program(key, arrays, c, u, v), in_axes=-2)(coef)
     else:
         pred = jax.vmap(lambda h: fam.evaluate_program(key, arrays, fam.fit_program(
             key, arrays, u, v, values, weights, mask & ~h, metric), u, v))(held)

@@ -16,7 +16,9 @@ degree ``d`` of the grid's coordinates, ``d = -1`` for none; :class:`BasisFamily
 leave-one-out one, and says which materials it was learned from in ``trained_on``), ``polynomial`` (the log-link,
 clamped polynomial; configurations ``(variables, degree, interactions)``, the fitted
 :class:`polyjax.PolynomialBRDF` as parameters), ``skew`` (the learned basis plus a non-reciprocal part, the first
-``m`` rows times ``cos(theta_u) - cos(theta_v)``; configurations ``(k, m)``: :class:`SkewBasisFamily`).
+``m`` rows times ``cos(theta_u) - cos(theta_v)``; configurations ``(k, m)``: :class:`SkewBasisFamily`), ``shared``
+(one shape for the three channels, each channel its own offset and scale: the basis rows, skew rows and symmetric
+polynomial terms; configurations ``(k, m, p)``: :class:`SharedShapeFamily`).
 
 No deviation from the protocol above. ``metric`` is ``"log"`` (the default: the basis fit weighs the log metric and,
 by ``basis.MIX_LOG``, equation (11)'s L2) or ``"l2"`` (the L2 alone). The fits are not jitted as a whole here (the
@@ -27,6 +29,7 @@ from typing import Hashable, Protocol
 
 from .basis import BasisFamily
 from .polynomial import PolynomialFamily
+from .shared import SharedShapeFamily
 from .skew import SkewBasisFamily
 
 
@@ -53,9 +56,11 @@ class Family(Protocol):
     # ``configs``); ``candidate_chains(budget)``, the same as lists walked in order while the held-out error falls
     # (else each candidate alone); ``design(key, arrays, u, v)`` and ``from_design(key, arrays, phi, params)``,
     # the program's columns and its values from them (the choice then fits every fold from shared
-    # factorisations; else each fold by ``fit_program`` with its held-out samples masked out).
+    # factorisations); ``fit_folds(key, arrays, u, v, values, weights, mask, held, parts, metric)``, every fold's
+    # fit at once (``(*batch, K, ...)``); else each fold by ``fit_program`` with its held-out samples masked out.
 
 
-FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily())}
+FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily(),
+                                                SharedShapeFamily())}
 
-__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily", "SkewBasisFamily"]
+__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily", "SharedShapeFamily", "SkewBasisFamily"]

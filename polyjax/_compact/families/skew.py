@@ -31,6 +31,8 @@ from .basis import N_COMPONENTS, BasisFamily, _fit, _value, mix_for
 
 #: the numbers of basis rows the non-reciprocal part may use
 SKEW_ROWS = (1, 2, 3, 5, 8, 13, 21)
+#: the numbers of skew rows :func:`polyjax.fit_compact` tries (:meth:`SkewBasisFamily.candidates`)
+CANDIDATE_ROWS = (1, 2)
 #: the fewest symmetric basis rows the family offers beside its skew rows (:meth:`SkewBasisFamily.configs`)
 MIN_ROWS = 6
 
@@ -67,15 +69,16 @@ class SkewBasisFamily:
         return out
 
     def candidates(self, budget: int) -> list[tuple[int, int]]:
-        """The configurations :func:`polyjax.fit_compact` tries within ``budget``: all of :meth:`configs` (one per
-        ``m``, at most four)."""
-        return self.configs(budget)
+        """The configurations :func:`polyjax.fit_compact` tries within ``budget``: those of :meth:`configs` with
+        ``m`` in :data:`CANDIDATE_ROWS` (what MERL's reciprocal materials choose; a strongly non-reciprocal
+        measurement, the RGL satin, chooses the ``shared`` family's skew rows, ``shared.py``)."""
+        return [c for c in self.configs(budget) if c[1] in CANDIDATE_ROWS]
 
     def candidate_chains(self, budget: int) -> list[list[tuple[int, int]]]:
-        """Each configuration a chain of its own (every one is cross-validated): the held-out error is not
-        monotone in ``m`` (MERL's reciprocal materials do best with 1-2 skew rows, the RGL satin with 5 at 33
-        numbers), so no order of them can be walked while it falls."""
-        return [[c] for c in self.configs(budget)]
+        """Each candidate a chain of its own (every one is cross-validated): the held-out error is not monotone
+        in ``m`` (MERL's reciprocal materials do best with 1-2 skew rows, the RGL satin with 5 at 33 numbers), so
+        no order of them can be walked while it falls."""
+        return [[c] for c in self.candidates(budget)]
 
     def n_numbers(self, config) -> int:
         k, m = config
