@@ -28,7 +28,7 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks), :func:`choose_compact` (:func:`polyjax.fit_compact`'s choice among family objects of one's
   own, e.g. a basis learned without the material; a :class:`CompactChoice`), :func:`compact_fold_ids` (the
-  fold of each sample in its cross-validation);
+  fold of each sample in its cross-validation), :func:`compact_fold_parts` (the folds as index arrays);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
   :func:`save_program`, :func:`load_program` (a fitter keeping its compiled executable beside the compilation cache,
@@ -51,6 +51,7 @@ from ._compact.families import SkewBasisFamily as CompactSkewFamily
 from ._compact.fit import Choice as CompactChoice
 from ._compact.fit import choose_compact, fit_compact_family
 from ._compact.select import fold_ids as compact_fold_ids
+from ._compact.select import fold_parts as compact_fold_parts
 from ._config import configured_data_root, data_file
 from ._files import check_output_path, make_cache_folder, write_atomically, write_bytes_atomically
 from ._fit.saved import ENV as SAVED_PROGRAMS_ENV
@@ -76,5 +77,5 @@ __all__ = [
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
     "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSharedFamily", "CompactSkewFamily",
     "choose_compact",
-    "compact_fold_ids", "fit_compact_family",
+    "compact_fold_ids", "compact_fold_parts", "fit_compact_family",
 ]

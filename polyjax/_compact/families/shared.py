@@ -100,6 +100,10 @@ class SharedShapeFamily:
                     out.append((k, m, p))
         return out
 
+    def candidates(self, budget: int) -> list[tuple[int, int, int]]:
+        """The configurations :func:`polyjax.fit_compact` may try within ``budget``: all of :meth:`configs`."""
+        return self.configs(budget)
+
     def candidate_chains(self, budget: int) -> list[list[tuple[int, int, int]]]:
         """For each degree ``p`` the reciprocal configuration, then the one with skew rows: the choice walks a chain
         while the held-out error falls, so the skew rows are tried only where the shape of that degree is the best
@@ -150,6 +154,7 @@ class SharedShapeFamily:
 
     def fit_program(self, config, arrays, u, v, values, weights, mask, metric: str = "log"):
         values = jnp.asarray(values)
+        mask = jnp.ones(values.shape, bool) if mask is None else mask
         return _fit(self._design(config, arrays, u, v), u, v, values, weights, mask, mix_for(metric))
 
     def evaluate_program(self, config, arrays, params, u, v):
