@@ -10,8 +10,8 @@ Models, at budgets of 9, 16, 33, 64, 128, 256 numbers per material:
 
 - ``compact``: :func:`polyjax.fit_compact`'s choice itself (``polyjax.internal.choose_compact``: 3-fold
   cross-validation on the fitting subsample over every family's candidates within the budget, the chains walked
-  as the library walks them, the least held-out log error refitted on all of it), with the ``basis`` and ``skew``
-  families on a basis learned leave-one-out: each material's basis is learned from the other materials
+  as the library walks them, the least held-out log error refitted on all of it), with the ``basis``, ``skew``
+  and ``shared`` families on a basis learned leave-one-out: each material's basis is learned from the other materials
   (``benchmarks/learn_compact_basis.py``), never from the material it fits;
 - each family alone by the same rule (``--family-materials``: on the first materials only);
 - analytic baselines (:func:`baselines.fit`, 16 starts, per channel: 3 x their parameters) and a standard material
@@ -69,7 +69,8 @@ def errors(values, pred, d):
 
 
 def loo_families(name, tables, mass, names_all):
-    """The families of the choice for material ``name``: ``basis`` and ``skew`` on a basis learned without it."""
+    """The families of the choice for material ``name``: ``basis``, ``skew`` and ``shared`` on a basis learned
+    without it."""
     basis = lcb.learn(tables, mass, names_all, exclude=[name])[0]
     return {"basis": BasisFamily(basis=basis), "skew": SkewBasisFamily(basis=basis),
             "shared": SharedShapeFamily(basis=basis),

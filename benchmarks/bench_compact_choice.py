@@ -5,8 +5,8 @@ error falls (``polyjax/_compact/select.py``). This script cross-validates every 
 same folds, the same programs) and reports, per material, whether the greedy search chose the candidate of least
 held-out error, how many candidates each cross-validated, and the held-out error of the greedy choice over the
 exhaustive one's. Materials: every ``--step``-th of ``MERL_NAMES``, fitted on ``load_merl_nbrdf(name,
-subsample=20000, seed=11)``, with the ``basis`` and ``skew`` families on a basis learned without the material
-(``bench_compact.loo_families``).
+subsample=20000, seed=11)``, with the ``basis``, ``skew`` and ``shared`` families on a basis learned without the
+material (``bench_compact.loo_families``).
 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_choice.py [--budget 33] [--step 5]``
 """

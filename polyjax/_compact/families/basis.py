@@ -61,8 +61,11 @@ def shipped_basis():
 
 @functools.cache
 def _device_basis(x64: bool):
-    """The shipped basis as a JAX array (once per precision mode: float64 with x64 enabled, else float32)."""
-    return jnp.asarray(shipped_basis()[0])
+    """The shipped basis as a JAX array (once per precision mode: float64 with x64 enabled, else float32), made
+    eagerly even when the first call is inside a trace (``load_model``'s or a jitted fit's): a cached tracer would
+    leak out of it."""
+    with jax.ensure_compile_time_eval():
+        return jnp.asarray(shipped_basis()[0])
 
 
 class BasisFamily:
