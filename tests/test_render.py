@@ -165,3 +165,23 @@ def test_scene_input_errors():
         pr.render(lone_sphere(lambda u, v: jnp.zeros((2,) + u.shape)))
     with pytest.raises(pj.InputError, match="exactly one Sphere"):
         pr.render_grid([[pr.Lambertian()]], sphere_on_plane(pr.Lambertian()))
+
+
+def test_huge_scene_values_are_refused_or_normalised_without_overflow():
+    """Directions of any finite size are normalised exactly (|d| overflowed for components near 1e300 and left a
+    zero light direction, a NaN camera); positions and sizes past 1e15 scene units, whose squares the ray
+    intersections form, are named errors."""
+    d = np.asarray(pr.DirectionalLight(direction=(1e300, 1e300, 1e300)).direction)
+    np.testing.assert_allclose(d, np.full(3, 3 ** -0.5), rtol=1e-15)
+    n = np.asarray(pr.Plane(pr.Lambertian(), normal=(0.0, 1e300, 1e300)).normal)
+    np.testing.assert_allclose(n, [0.0, 2 ** -0.5, 2 ** -0.5], rtol=1e-15)
+    for make, name in [(lambda: pr.Camera(eye=(1e300, 1e300, 1e300)), "eye"),
+                       (lambda: pr.Camera(eye=(0.0, 0.0, 0.0)), "target"),
+                       (lambda: pr.Sphere(pr.Lambertian(), radius=1e300), "radius"),
+                       (lambda: pr.Sphere(pr.Lambertian(), center=(0.0, -1e16, 0.0)), "center"),
+                       (lambda: pr.Plane(pr.Lambertian(), height=1e300), "height"),
+                       (lambda: pr.PointLight(position=(1e20, 0.0, 0.0)), "position")]:
+        with pytest.raises(pj.InputError, match=name):
+            make()
+    o, dirs = pr.Camera(eye=(0.0, 0.0, 1e15)).rays()  # the largest distance allowed renders finite rays
+    assert np.all(np.isfinite(np.asarray(dirs))) and np.all(np.isfinite(np.asarray(o)))

@@ -37,6 +37,46 @@ def _vec3(x, name) -> Array:
     return a if isinstance(a, jax.Array) else jnp.asarray(a)
 
 
+#: the largest magnitude of a concrete position, size or height (scene units): squares and products of such numbers,
+#: as ray-sphere and ray-plane intersections form, stay far from overflow in float64 and float32 (3.4e38)
+MAX_COORDINATE = 1e15
+
+
+def _position(x, name):
+    """:func:`_np3` of a point, concrete values also within :data:`MAX_COORDINATE` in magnitude."""
+    a = _np3(x, name)
+    if not is_traced(a) and not np.all(np.abs(a) <= MAX_COORDINATE):
+        raise InputError(f"{name}: expected coordinates within +-{MAX_COORDINATE:g} scene units, found "
+                         f"{np.asarray(a).tolist()!r}")
+    return a
+
+
+def _scalar(x, name, positive=False):
+    """A concrete finite number (positive if asked) within :data:`MAX_COORDINATE` in magnitude."""
+    try:
+        value = float(x)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number, found {x!r}") from None
+    if not (np.isfinite(value) and abs(value) <= MAX_COORDINATE and (value > 0 or not positive)):
+        kind = "a positive number" if positive else "a finite number"
+        raise InputError(f"{name}: expected {kind} within +-{MAX_COORDINATE:g} scene units, found {x!r}")
+    return value
+
+
+def _unit(a, name):
+    """``a / |a|`` of a concrete finite 3-vector without overflow or underflow: where ``|a|`` is out of range, ``a``
+    is scaled by its largest component first (elsewhere ``a / |a|`` exactly as the traced path computes it, so
+    that a scene built from values and one built inside ``jit`` agree to the bit); InputError for the zero
+    vector."""
+    scale = np.max(np.abs(a))
+    if scale == 0:
+        raise InputError(f"{name}: expected a non-zero vector")
+    if 1e-100 < scale < 1e100:
+        return a / np.linalg.norm(a)
+    b = a / scale
+    return b / np.linalg.norm(b)
+
+
 def _np3(x, name):
     """A 3-vector (a scalar is repeated). Concrete values are checked for shape and finiteness; traced values
     (inside ``jit``/``grad``) are checked for shape only and kept as they are, so that they stay differentiable."""
@@ -80,9 +120,12 @@ class Camera(eqx.Module):
             raise InputError(f"width, height: expected positive pixel counts, found {width} x {height}")
         if not is_traced(fov_deg) and not 0.0 < float(fov_deg) < 180.0:
             raise InputError(f"fov_deg: expected a field of view in (0, 180) degrees, found {fov_deg}")
-        eye, target, up = _np3(eye, "eye"), _np3(target, "target"), _np3(up, "up")
-        if not is_traced(eye, target, up) and np.linalg.norm(np.cross(target - eye, up)) < 1e-9:
-            raise InputError("up: expected a direction not parallel to the viewing direction target - eye")
+        eye, target, up = _position(eye, "eye"), _position(target, "target"), _np3(up, "up")
+        if not is_traced(eye, target, up):
+            if np.array_equal(eye, target):
+                raise InputError(f"target: expected a point other than the eye, found {target.tolist()!r}")
+            if np.linalg.norm(np.cross(_unit(target - eye, "target - eye"), _unit(up, "up"))) < 1e-9:
+                raise InputError("up: expected a direction not parallel to the viewing direction target - eye")
         self.eye, self.target, self.up = jnp.asarray(eye), jnp.asarray(target), jnp.asarray(up)
         self.fov_deg = _float(fov_deg) if is_traced(fov_deg) else jnp.asarray(float(fov_deg))
         self.ortho_height = _float(ortho_height) if is_traced(ortho_height) else jnp.asarray(float(ortho_height))
@@ -118,10 +161,8 @@ class Sphere(eqx.Module):
     brdf: BRDF
 
     def __init__(self, brdf, center: ArrayLike = (0.0, 0.0, 0.0), radius: float = 1.0):
-        if not is_traced(radius) and not float(radius) > 0:
-            raise InputError(f"radius: expected a positive radius, found {radius}")
-        self.center = _vec3(center, "center")
-        self.radius = _float(radius) if is_traced(radius) else jnp.asarray(float(radius))
+        self.center = jnp.asarray(_position(center, "center"))
+        self.radius = _float(radius) if is_traced(radius) else jnp.asarray(_scalar(radius, "radius", positive=True))
         self.brdf = rgb_brdf(brdf)
 
 
@@ -145,14 +186,13 @@ class Plane(eqx.Module):
             self.tangent = t / jnp.linalg.norm(t)
             self.brdf = rgb_brdf(brdf)
             return
-        n = _np3(normal, "normal")
-        n = n / np.linalg.norm(n)
-        t = _np3(tangent, "tangent")
+        n = _unit(_np3(normal, "normal"), "normal")
+        t = _unit(_np3(tangent, "tangent"), "tangent")
         t = t - n * (t @ n)
         if np.linalg.norm(t) < 1e-9:
             raise InputError("tangent: expected a direction not parallel to the plane normal")
         self.normal = jnp.asarray(n)
-        self.offset = jnp.asarray(float(height))
+        self.offset = jnp.asarray(_scalar(height, "height"))
         self.tangent = jnp.asarray(t / np.linalg.norm(t))
         self.brdf = rgb_brdf(brdf)
 
@@ -215,10 +255,7 @@ class DirectionalLight(eqx.Module):
             self.direction = d / jnp.linalg.norm(d)
             self.irradiance = _vec3(irradiance, "irradiance")
             return
-        d = _np3(direction, "direction")
-        if np.linalg.norm(d) == 0:
-            raise InputError("direction: expected a non-zero vector")
-        self.direction = jnp.asarray(d / np.linalg.norm(d))
+        self.direction = jnp.asarray(_unit(_np3(direction, "direction"), "direction"))
         self.irradiance = _vec3(irradiance, "irradiance")
 
 
@@ -229,7 +266,7 @@ class PointLight(eqx.Module):
     intensity: Float[Array, "3"]
 
     def __init__(self, position: ArrayLike = (2.0, 2.0, 4.0), intensity: ArrayLike = 24.0):
-        self.position = _vec3(position, "position")
+        self.position = jnp.asarray(_position(position, "position"))
         self.intensity = _vec3(intensity, "intensity")
 
 

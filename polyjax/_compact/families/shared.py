@@ -126,14 +126,14 @@ class SharedShapeFamily:
         return self.evaluate_program(config, self.program(config)[1], params, u, v)
 
     # the choice's program interface (polyjax/_compact/select.py): one program per configuration, the basis table
-    # passed as data (a leave-one-out basis is the one fitted); no ``design``: each fold is fitted on its own
+    # passed as data (a leave-one-out basis is the one fitted); the folds are fitted by its own ``fit_folds`` (not
+    # named ``design``: the basis family's fold fits are per channel)
 
     def program(self, config):
         return config, (self._inner.basis,)
 
     def _design(self, config, arrays, u, v):
-        """``(n, k + m + n_P)``: the columns of the basis table ``arrays[0]`` (named so that the choice fits each
-        fold on its own: the fold fits of ``basis.fit_folds`` are per channel)."""
+        """``(n, k + m + n_P)``: the columns at directions ``(n, 3)``, the basis rows read from ``arrays[0]``."""
         k, m, p = config
         phi = _grid.sample(arrays[0][: max(k, m)], u, v)
         cols = [phi[:, :k], skew_factor(u, v)[:, None] * phi[:, :m]]
