@@ -7,7 +7,8 @@ in blocks of a second or two and call :func:`check_interrupt` between them, whic
 watchdog thread learns of the signal at once, even while the main thread waits inside one long XLA call (through
 :func:`signal.set_wakeup_fd`): if the process has not ended :data:`GRACE_S` seconds later, it removes what the
 command left half made (:func:`forget_outputs`' records), prints ``interrupted`` and ends the process with status
-130. A second Ctrl-C ends it at once the same way.
+130. A second Ctrl-C ends it at once the same way. A Ctrl-C that lands where Python cannot raise (a garbage
+collector's callback, a ``__del__``) sets the flag without a word (:func:`_unraisable`).
 """
 
 from __future__ import annotations
@@ -80,6 +81,20 @@ def _handler(signum, frame) -> None:
     raise Interrupted()
 
 
+def _unraisable(previous):
+    """``sys.unraisablehook`` that drops :class:`Interrupted`: Ctrl-C lands where Python cannot raise (a garbage
+    collector callback such as JAX's, a ``__del__``), which Python reports as "Exception ignored" with a traceback.
+    The flag is set all the same, so the work stops at its next check or the watchdog ends it; anything else goes
+    to ``previous``."""
+
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, Interrupted):
+            return
+        previous(unraisable)
+
+    return hook
+
+
 def _watchdog(fd: int) -> None:
     while True:
         try:
@@ -103,4 +118,5 @@ def install() -> None:
     os.set_blocking(w, False)
     signal.set_wakeup_fd(w, warn_on_full_buffer=False)
     signal.signal(signal.SIGINT, _handler)
+    sys.unraisablehook = _unraisable(sys.unraisablehook)
     threading.Thread(target=_watchdog, args=(r,), daemon=True, name="polyjax-interrupt").start()
