@@ -14,6 +14,8 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   fitter, or a check of one, that sizes a problem for that path);
 - results: :func:`raise_on_status` (``throw=`` of every fitter), :func:`result_message`, :func:`status_warnings`;
 - LAPACK: :func:`one_lapack_thread` (decorate a public fitter: jaxlib's LAPACK library limited before it runs);
+- Ctrl-C: :func:`check_interrupt` (a long loop calls it between its blocks), :class:`Interrupted` (what it raises),
+  :func:`install_interrupt_handler` (the command line's SIGINT handling, for a command of one's own);
 - saved models: :class:`ModelKind`, :func:`module_kind`, :func:`register_model_kind`, :func:`model_kinds`,
   :func:`kind_named`, :func:`kind_of`, :func:`fitter_for` (``polyjax.save_model``/``load_model`` and
   ``polyjax fit --model`` find other packages' models through them);
@@ -61,6 +63,8 @@ from ._io import ModelKind, fitter_for, kind_named, kind_of, model_kinds, module
 from ._metrics import fit_weights
 from ._results import message as result_message
 from ._results import raise_on_status, status_warnings
+from ._run.interrupt import Interrupted, check_interrupt
+from ._run.interrupt import install as install_interrupt_handler
 from ._solve.lstsq import TALL_ROWS
 from ._solve.threads import one_lapack_thread
 
@@ -78,4 +82,5 @@ __all__ = [
     "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSharedFamily", "CompactSkewFamily",
     "choose_compact",
     "compact_fold_ids", "compact_fold_parts", "fit_compact_family",
+    "Interrupted", "check_interrupt", "install_interrupt_handler",
 ]

@@ -200,10 +200,10 @@ def test_ctrl_c_where_python_cannot_raise_prints_no_traceback():
     JAX's garbage-collector callback) was printed as "Exception ignored" with a traceback before ``interrupted``;
     it is now dropped (the flag is set all the same), and any other such exception is still reported."""
     code = ("import gc\n"
-            "from polyjax._run import interrupt\n"
-            "interrupt.install()\n"
+            "from polyjax.internal import Interrupted, install_interrupt_handler\n"
+            "install_interrupt_handler()\n"
             "class A:\n"
-            "    def __del__(self): raise interrupt.Interrupted()\n"
+            "    def __del__(self): raise Interrupted()\n"
             "class B:\n"
             "    def __del__(self): raise ValueError('still reported')\n"
             "a, b = A(), B()\n"
