@@ -38,7 +38,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _grid
-from .basis import G_MAX, N_COMPONENTS, BasisFamily, _inside_nodes, _lstsq, _weights, mix_for
+from ._on_basis import OnLearnedBasis
+from .basis import G_MAX, _inside_nodes, _lstsq, _weights, mix_for
 from .basis import _fit as basis_fit
 from .basis import fit_folds as basis_fit_folds
 from .skew import skew_factor
@@ -69,20 +70,13 @@ def _poly_terms(u, v, p, xp=jnp):
     return xp.stack(cols + [1.0 / (s + LS_OFFSET)], -1)
 
 
-class SharedShapeFamily:
+class SharedShapeFamily(OnLearnedBasis):
     """One shape for the three channels (module docstring); configurations ``(k, m, p)``: ``k`` basis rows, ``m``
     of them also times the non-reciprocal factor, symmetric terms of degree ``p`` (-1: none). ``basis`` and
-    ``trained_on`` as :class:`BasisFamily` (default: the shipped basis)."""
+    ``trained_on`` as :class:`BasisFamily` (default: the shipped basis); parameters ``(*batch, k + m + n_P + 6)``:
+    the shape's coefficients, then the offsets ``d`` and the scales ``s`` of R, G, B."""
 
     name = "shared"
-
-    def __init__(self, basis=None, trained_on=None):
-        self._inner = BasisFamily(basis, trained_on)
-        self._rows = N_COMPONENTS if basis is None else int(np.shape(basis)[0])
-
-    @property
-    def trained_on(self) -> tuple[str, ...]:
-        return self._inner.trained_on
 
     def n_numbers(self, config) -> int:
         k, m, p = config
@@ -109,28 +103,17 @@ class SharedShapeFamily:
         while the held-out error falls, so the skew rows are tried only where the shape of that degree is the best
         of the heads (a measurement far from reciprocal: the RGL satin; cross-validating them on every material
         would cost a third of :func:`polyjax.fit_compact`'s time)."""
-        return [[c for c in self.configs(budget) if c[2] == p] for p in POLY_DEGREES
-                if any(c[2] == p for c in self.configs(budget))]
+        configs = self.configs(budget)
+        chains = [[c for c in configs if c[2] == p] for p in POLY_DEGREES]
+        return [chain for chain in chains if chain]
 
     def columns(self, config, u, v):
         """``(n, k + m + n_P)``: the basis rows, the skew rows, the symmetric terms at directions ``(n, 3)``."""
         return self._design(config, self.program(config)[1], u, v)
 
-    def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
-        """Parameters ``(*batch, k + m + n_P + 6)`` of ``values (*batch, 3, n)``: the shape's coefficients, then
-        the offsets ``d`` and the scales ``s`` of R, G, B."""
-        return self.fit_program(config, self.program(config)[1], u, v, values, weights, mask, metric)
-
-    def evaluate(self, config, params, u, v):
-        """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
-        return self.evaluate_program(config, self.program(config)[1], params, u, v)
-
-    # the choice's program interface (polyjax/_compact/select.py): one program per configuration, the basis table
-    # passed as data (a leave-one-out basis is the one fitted); the folds are fitted by its own ``fit_folds`` (not
-    # named ``design``: the basis family's fold fits are per channel)
-
-    def program(self, config):
-        return config, (self._inner.basis,)
+    # the choice's program interface (polyjax/_compact/select.py; program, fit and evaluate: OnLearnedBasis); the
+    # folds are fitted by its own ``fit_folds`` (its columns not named ``design``: the basis family's fold fits are
+    # per channel)
 
     def _design(self, config, arrays, u, v):
         """``(n, k + m + n_P)``: the columns at directions ``(n, 3)``, the basis rows read from ``arrays[0]``."""
@@ -160,9 +143,6 @@ class SharedShapeFamily:
     def evaluate_program(self, config, arrays, params, u, v):
         phi = self._design(config, arrays, u, v)
         return shared_value(phi, self._top_columns(config, arrays, phi.dtype), params)
-
-    def unpad(self, config, params):
-        return params
 
     def fit_folds(self, config, arrays, u, v, values, weights, mask, held, parts, metric: str = "log"):
         """The cross-validation's fold fits ``(*batch, K, w + 6)`` (:func:`fit_folds`)."""

@@ -24,10 +24,10 @@ model is found again among those of its own size).
 """
 
 import jax.numpy as jnp
-import numpy as np
 
 from . import _grid
-from .basis import N_COMPONENTS, BasisFamily, _fit, _value, mix_for
+from ._on_basis import OnLearnedBasis
+from .basis import _fit, _value, mix_for
 
 #: the numbers of basis rows the non-reciprocal part may use
 SKEW_ROWS = (1, 2, 3, 5, 8, 13, 21)
@@ -42,19 +42,11 @@ def skew_factor(u, v):
     return jnp.clip(u[..., 2], 0.0, 1.0) - jnp.clip(v[..., 2], 0.0, 1.0)
 
 
-class SkewBasisFamily:
+class SkewBasisFamily(OnLearnedBasis):
     """The learned basis with a non-reciprocal part (module docstring); ``basis`` and ``trained_on`` as
-    :class:`BasisFamily` (default: the shipped basis)."""
+    :class:`BasisFamily` (default: the shipped basis); parameters ``(*batch, 3, k + m)``."""
 
     name = "skew"
-
-    def __init__(self, basis=None, trained_on=None):
-        self._inner = BasisFamily(basis, trained_on)
-        self._rows = N_COMPONENTS if basis is None else int(np.shape(basis)[0])
-
-    @property
-    def trained_on(self) -> tuple[str, ...]:
-        return self._inner.trained_on
 
     def configs(self, budget: int) -> list[tuple[int, int]]:
         """``(k, m)``: for each ``m`` of :data:`SKEW_ROWS`, the largest ``k`` (``max(m, MIN_ROWS) <= k <=`` the
@@ -88,19 +80,7 @@ class SkewBasisFamily:
         """``(n, k + m)``: the first ``k`` basis rows read at the directions, then the first ``m`` times ``t``."""
         return self.design(config, self.program(config)[1], u, v)
 
-    def fit(self, config, u, v, values, weights, mask, metric: str = "log"):
-        """Coefficients ``(*batch, 3, k + m)`` of ``values (*batch, 3, n)`` (module docstring)."""
-        return self.fit_program(config, self.program(config)[1], u, v, values, weights, mask, metric)
-
-    def evaluate(self, config, params, u, v):
-        """Model values ``(*batch, 3, n)`` at directions ``(n, 3)``."""
-        return self.evaluate_program(config, self.program(config)[1], params, u, v)
-
-    # the choice's program interface (polyjax/_compact/select.py): one program per configuration, the basis table
-    # passed as data (so that another basis, e.g. a leave-one-out one, is the one fitted)
-
-    def program(self, config):
-        return config, (self._inner.basis,)
+    # the choice's program interface (polyjax/_compact/select.py; program, fit and evaluate: OnLearnedBasis)
 
     def design(self, config, arrays, u, v):
         """``(n, k + m)``: :meth:`columns` of the basis table ``arrays[0]``."""
@@ -116,7 +96,4 @@ class SkewBasisFamily:
 
     def evaluate_program(self, config, arrays, params, u, v):
         return self.from_design(config, arrays, self.design(config, arrays, u, v), params)
-
-    def unpad(self, config, params):
-        return params
 
