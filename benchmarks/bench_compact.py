@@ -10,9 +10,9 @@ Models, at budgets of 9, 16, 33, 64, 128, 256 numbers per material:
 
 - ``compact``: :func:`polyjax.fit_compact`'s choice itself (``polyjax.internal.choose_compact``: 3-fold
   cross-validation on the fitting subsample over every family's candidates within the budget, the chains walked
-  as the library walks them, the least held-out log error refitted on all of it), with the ``basis``, ``skew``
-  and ``shared`` families on a basis learned leave-one-out: each material's basis is learned from the other materials
-  (``benchmarks/learn_compact_basis.py``), never from the material it fits;
+  as the library walks them, the least held-out log error refitted on all of it), with the ``basis``, ``skew``,
+  ``shared`` and ``sparse`` families on a basis learned leave-one-out: each material's basis is learned from the
+  other materials (``benchmarks/learn_compact_basis.py``), never from the material it fits;
 - each family alone by the same rule (``--family-materials``: on the first materials only);
 - analytic baselines (:func:`baselines.fit`, 16 starts, per channel: 3 x their parameters) and a standard material
   (glTF PBR), fitted on a 5,000-bin part of the fitting subsample;
@@ -50,13 +50,14 @@ from polyjax._compact.select import rgb_errors  # noqa: E402
 from polyjax.internal import CompactBasisFamily as BasisFamily  # noqa: E402
 from polyjax.internal import CompactSharedFamily as SharedShapeFamily  # noqa: E402
 from polyjax.internal import CompactSkewFamily as SkewBasisFamily  # noqa: E402
+from polyjax.internal import CompactSparseFamily as SparseShapeFamily  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 import learn_compact_basis as lcb  # noqa: E402
 
 BUDGETS = (9, 16, 33, 64, 128, 256)
-FAMILY_SETS = {"compact": ("basis", "skew", "polynomial", "shared"), "basis": ("basis",), "skew": ("skew",),
-               "shared": ("shared",),
+FAMILY_SETS = {"compact": ("basis", "skew", "polynomial", "shared", "sparse"), "basis": ("basis",), "skew": ("skew",),
+               "shared": ("shared",), "sparse": ("sparse",),
                "polynomial": ("polynomial",)}
 BASELINES = {"cook-torrance": "cook-torrance", "ward": "ward", "glTF PBR (standard)": "gltf-pbr"}
 PUBLISHED = {"published SGD": ("sgd", 33), "published ABC": ("abc", 9)}
@@ -69,11 +70,11 @@ def errors(values, pred, d):
 
 
 def loo_families(name, tables, mass, names_all):
-    """The families of the choice for material ``name``: ``basis``, ``skew`` and ``shared`` on a basis learned
-    without it."""
+    """The families of the choice for material ``name``: ``basis``, ``skew``, ``shared`` and ``sparse`` on a basis
+    learned without it."""
     basis = lcb.learn(tables, mass, names_all, exclude=[name])[0]
     return {"basis": BasisFamily(basis=basis), "skew": SkewBasisFamily(basis=basis),
-            "shared": SharedShapeFamily(basis=basis),
+            "shared": SharedShapeFamily(basis=basis), "sparse": SparseShapeFamily(basis=basis),
             "polynomial": pj.compact_families()["polynomial"]}
 
 

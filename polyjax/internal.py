@@ -26,7 +26,9 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
 - compact models: :data:`COMPACT_FAMILIES` (the families of compact models, by name: ``configs``, ``n_numbers``,
   ``fit``, ``evaluate``), :class:`CompactBasisFamily` (the learned-basis family on a basis of one's own, e.g. one
   learned without the material it fits), :class:`CompactSkewFamily` (the same with a non-reciprocal part),
-  :class:`CompactSharedFamily` (one shape for the three channels on such a basis),
+  :class:`CompactSharedFamily` (one shape for the three channels on such a basis), :class:`CompactSparseFamily`
+  (the same, its terms chosen per material from a dictionary; :func:`compact_select_columns` its greedy selection,
+  :func:`compact_pack_mask` and :func:`compact_unpack_mask` the mask's stored numbers),
   :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks), :func:`choose_compact` (:func:`polyjax.fit_compact`'s choice among family objects of one's
   own, e.g. a basis learned without the material; a :class:`CompactChoice`), :func:`compact_fold_ids` (the
@@ -50,6 +52,10 @@ from ._compact.families import FAMILIES as COMPACT_FAMILIES
 from ._compact.families import BasisFamily as CompactBasisFamily
 from ._compact.families import SharedShapeFamily as CompactSharedFamily
 from ._compact.families import SkewBasisFamily as CompactSkewFamily
+from ._compact.families import SparseShapeFamily as CompactSparseFamily
+from ._compact.families.sparse import pack as compact_pack_mask
+from ._compact.families.sparse import select as compact_select_columns
+from ._compact.families.sparse import unpack as compact_unpack_mask
 from ._compact.fit import Choice as CompactChoice
 from ._compact.fit import choose_compact, fit_compact_family
 from ._compact.select import fold_ids as compact_fold_ids
@@ -80,6 +86,7 @@ __all__ = [
     "TALL_ROWS", "cast_concrete", "forget_memos", "grid_memo",
     "check_output_path", "make_cache_folder", "write_atomically", "write_bytes_atomically",
     "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSharedFamily", "CompactSkewFamily",
+    "CompactSparseFamily", "compact_pack_mask", "compact_select_columns", "compact_unpack_mask",
     "choose_compact",
     "compact_fold_ids", "compact_fold_parts", "fit_compact_family",
     "Interrupted", "check_interrupt", "install_interrupt_handler",

@@ -80,7 +80,7 @@ def test_save_load_bit_exact(tmp_path, two, fitted, suffix):
 
 
 @pytest.mark.parametrize("family, config", [("basis", (3, -1)), ("skew", (6, 1)), ("shared", (22, 5, -1)),
-                                            ("shared", (7, 0, 3))])
+                                            ("shared", (7, 0, 3)), ("sparse", (22, 106))])
 def test_every_family_saves_and_loads_bit_exact(tmp_path, tiny, family, config):
     model = pj.internal.fit_compact_family(tiny, family, config)
     back = pj.load_model(pj.save_model(tmp_path / "m.npz", model))

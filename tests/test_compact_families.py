@@ -8,7 +8,15 @@ import pytest
 
 import polyjax as pj
 from benchmarks.learn_compact_basis import learn
-from polyjax.internal import COMPACT_FAMILIES, CompactBasisFamily, choose_compact, compact_fold_ids
+from polyjax.internal import (
+    COMPACT_FAMILIES,
+    CompactBasisFamily,
+    choose_compact,
+    compact_fold_ids,
+    compact_pack_mask,
+    compact_select_columns,
+    compact_unpack_mask,
+)
 
 MATERIALS = ("chrome", "white-paint")
 
@@ -51,6 +59,12 @@ def test_configs_fit_the_budget_and_count_three_channels():
     assert shared.configs(33) == [(27, 0, -1), (22, 5, -1), (7, 0, 3)] and shared.n_numbers((7, 0, 3)) == 33
     assert shared.configs(9) == [(3, 0, -1)] and shared.n_numbers((3, 0, -1)) == 9
     assert shared.candidate_chains(33) == [[(27, 0, -1), (22, 5, -1)], [(7, 0, 3)]]
+    # terms chosen per material: 22 of the dictionary's 106 columns, the mask in 5 numbers of 24 bits, the colour
+    sparse = COMPACT_FAMILIES["sparse"]
+    assert sparse.configs(33)[-1] == (22, 106) and sparse.n_numbers((22, 106)) == 33
+    assert sparse.candidates(33) == [(22, 106)] and sparse.configs(11) == [] and sparse.configs(12) == [(1, 106)]
+    # a basis degree whose largest k is 1 is not tried
+    assert (1, 2) in basis.configs(33) and (1, 2) not in basis.candidates(33) and (7, 1) in basis.candidates(33)
 
 
 def test_padded_program_fits_as_the_configuration_alone(merl):
@@ -88,7 +102,7 @@ def test_skew_family_fits_a_non_reciprocal_model_the_basis_cannot(merl):
 
 @pytest.mark.parametrize("family, config", [("basis", (11, -1)), ("basis", (7, 1)), ("skew", (8, 3)),
                                             ("polynomial", ("rusinkiewicz", 3, True)), ("shared", (22, 5, -1)),
-                                            ("shared", (7, 0, 3))])
+                                            ("shared", (7, 0, 3)), ("sparse", (22, 106))])
 def test_finite_non_negative_bounded_over_the_merl_grid(merl, family, config):
     fit, u, v = merl
     fam = COMPACT_FAMILIES[family]
@@ -149,7 +163,7 @@ def test_leave_one_out_basis_excludes_the_material():
     assert len(shipped) == 100 and set(shipped) == set(pj.data.MERL_NAMES)
 
 
-@pytest.mark.parametrize("family,budget", [("basis", 3), ("skew", 21), ("shared", 9)])
+@pytest.mark.parametrize("family,budget", [("basis", 3), ("skew", 21), ("shared", 9), ("sparse", 16)])
 def test_cross_validation_scores_each_fold_fitted_without_it(merl, family, budget):
     """The choice's held-out errors (every fold fitted at once from shared factorisations) are those of the
     family's own fit on the other folds' samples, scored on the fold's: the root mean square over the folds."""
@@ -207,3 +221,95 @@ def test_shared_family_finds_a_colour_in_six_numbers(merl):
     five = basis.evaluate((5, -1), basis.fit((5, -1), fit.u, fit.v, truth, fit.weights, ok, "log"), fit.u, fit.v)
     rel = float(jnp.sqrt(jnp.sum(jnp.where(ok, five - truth, 0.0) ** 2) / jnp.sum(jnp.where(ok, truth, 0.0) ** 2)))
     assert rel > 0.01, rel
+
+
+def test_sparse_mask_packs_into_numbers_float32_holds():
+    """The column mask round-trips through its 24-bit numbers, in float64 and in float32."""
+    rng = np.random.default_rng(4)
+    chosen = jnp.asarray(rng.uniform(size=(3, 106)) < 0.3)
+    words = compact_pack_mask(chosen)
+    assert words.shape == (3, 5) and float(jnp.max(words)) < 2.0 ** 24
+    for dtype in (jnp.float64, jnp.float32):
+        back = compact_unpack_mask(words.astype(dtype), 106)
+        np.testing.assert_array_equal(np.asarray(back) > 0.5, np.asarray(chosen))
+
+
+def _ormp(a, y, k):
+    """Order-recursive matching pursuit, written out in numpy: the column whose part orthogonal to those taken
+    best explains the residual, ``k`` times."""
+    a = a / np.linalg.norm(a, axis=0)
+    taken = []
+    for _ in range(k):
+        q = np.linalg.qr(a[:, taken])[0] if taken else np.zeros((len(y), 0))
+        r = y - q @ (q.T @ y)
+        perp = a - q @ (q.T @ a)
+        n2 = np.sum(perp ** 2, 0)
+        score = np.where(n2 > 1e-10, (perp.T @ r) ** 2 / np.maximum(n2, 1e-300), -1.0)
+        score[taken] = -2.0
+        taken.append(int(np.argmax(score)))
+    return sorted(taken)
+
+
+def test_sparse_selection_is_matching_pursuit_and_finds_a_sparse_truth():
+    """The selection in the Gram matrix takes the columns order-recursive matching pursuit takes on the rows
+    themselves; on a sparse truth (5 of 40 random columns), exactly its columns."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(400, 40)) * rng.uniform(0.1, 3.0, 40)
+    truth = [3, 11, 17, 29, 38]
+    y = a[:, truth] @ rng.uniform(1.0, 2.0, 5)
+    got = np.nonzero(np.asarray(compact_select_columns(jnp.asarray(a.T @ a), jnp.asarray(a.T @ y), 5)))[0]
+    assert got.tolist() == truth
+    noisy = y + rng.normal(size=400) * 2.0
+    got = np.nonzero(np.asarray(compact_select_columns(jnp.asarray(a.T @ a), jnp.asarray(a.T @ noisy), 9)))[0]
+    assert got.tolist() == _ormp(a, noisy, 9)
+    # a zero column is never taken while others remain
+    a[:, 7] = 0.0
+    got = np.asarray(compact_select_columns(jnp.asarray(a.T @ a), jnp.asarray(a.T @ noisy), 39))
+    assert not got[7] and got.sum() == 39
+
+
+@pytest.mark.parametrize("metric", ["log", "l2"])
+def test_sparse_fold_fits_are_the_fit_without_the_fold(merl, metric):
+    """Each fold's columns are chosen from the fold Gram matrices of one pass over the samples, and fitted: the
+    family's own fit with the fold masked out, mask and all."""
+    fit = merl[0][1]
+    fam, config = COMPACT_FAMILIES["sparse"], (10, 106)
+    key, arrays = fam.program(config)
+    ids = compact_fold_ids(fit.n_samples, 3)
+    held = jnp.asarray(ids[None, :] == np.arange(3)[:, None])
+    parts = pj.internal.compact_fold_parts(fit.n_samples, 3)
+    folds = fam.fit_folds(key, arrays, fit.u, fit.v, fit.values, fit.weights, fit.mask, held, parts, metric)
+    assert folds.shape == (3, fam.n_numbers(config))
+    masks = []
+    for k in range(3):
+        alone = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask & (ids != k), metric)
+        np.testing.assert_array_equal(np.asarray(folds[k, :5]), np.asarray(alone[:5]))  # the same columns
+        np.testing.assert_allclose(np.asarray(folds[k]), np.asarray(alone), rtol=1e-7, atol=1e-9)
+        masks.append(tuple(np.asarray(alone[:5])))
+    assert len(set(masks)) > 1 or metric == "l2"  # the folds choose for themselves (not one choice for all)
+
+
+def test_sparse_gradients_match_finite_differences(merl):
+    """A fitted sparse model differentiates in its coefficients, its colour and the directions; the mask's
+    numbers have no derivative (a mask, not a value)."""
+    fit = merl[0][0]
+    fam, config = COMPACT_FAMILIES["sparse"], (6, 106)
+    c0 = fam.fit(config, fit.u, fit.v, fit.values, fit.weights, fit.mask, "log")
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(6, 3)) * [0.4, 0.4, 0.1] + [0, 0, 1]
+    v = rng.normal(size=(6, 3)) * [0.4, 0.4, 0.1] + [0, 0, 1]
+    u, v = (jnp.asarray(x / np.linalg.norm(x, axis=-1, keepdims=True)) for x in (u, v))
+
+    @jax.jit
+    def loss(c, u):
+        return jnp.sum(fam.evaluate(config, c, u, v) ** 2)
+
+    g_c, g_u = jax.jit(jax.grad(loss, argnums=(0, 1)))(c0, u)
+    assert np.all(np.asarray(g_c[:5]) == 0.0)
+    h = 1e-6
+    for i in (6, 11, 16):  # a coefficient, an offset, a scale
+        e = jnp.zeros_like(c0).at[i].set(h)
+        assert float(g_c[i]) != 0.0
+        assert float(g_c[i]) == pytest.approx(float(loss(c0 + e, u) - loss(c0 - e, u)) / (2 * h), rel=1e-5)
+    e = jnp.zeros_like(u).at[2, 0].set(h)
+    assert float(g_u[2, 0]) == pytest.approx(float(loss(c0, u + e) - loss(c0, u - e)) / (2 * h), rel=1e-4)

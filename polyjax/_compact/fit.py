@@ -68,8 +68,8 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
     material (all three channels counted) are fitted on ``folds - 1`` folds of the samples and scored on the
     held-out fold, every fold in one program (``polyjax/_compact/select.py``; the basis family's configurations
     of one width share one compiled program). They come in chains (the basis family's largest ``k`` of each
-    degree, then its halvings; each of the skew family's candidates alone; the shared family's reciprocal shape
-    of each polynomial degree, then the same with skew rows; each of the polynomial's largest degrees of a
+    degree, then its halvings; each of the skew family's candidates alone; the shared family's reciprocal shape,
+    then the same with skew rows; the sparse family's most columns; each of the polynomial's largest degrees of a
     variable set alone): the first of every chain is tried, then the chain of the best of
     them is walked while the held-out error falls. The candidate of least held-out error in ``metric`` is
     returned, refitted on every sample; a candidate whose refit exceeds 10 times the largest measured value at a

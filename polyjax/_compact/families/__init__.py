@@ -18,7 +18,9 @@ clamped polynomial; configurations ``(variables, degree, interactions)``, the fi
 :class:`polyjax.PolynomialBRDF` as parameters), ``skew`` (the learned basis plus a non-reciprocal part, the first
 ``m`` rows times ``cos(theta_u) - cos(theta_v)``; configurations ``(k, m)``: :class:`SkewBasisFamily`), ``shared``
 (one shape for the three channels, each channel its own offset and scale: the basis rows, skew rows and symmetric
-polynomial terms; configurations ``(k, m, p)``: :class:`SharedShapeFamily`).
+polynomial terms; configurations ``(k, m, p)``: :class:`SharedShapeFamily`), ``sparse`` (the same one shape, its
+``k`` terms chosen per material from a dictionary of basis rows, skew rows, symmetric terms and hats in the grid's
+half and difference angles, the choice stored as a bit mask; configurations ``(k, D)``: :class:`SparseShapeFamily`).
 
 No deviation from the protocol above. ``metric`` is ``"log"`` (the default: the basis fit weighs the log metric and,
 by ``basis.MIX_LOG``, equation (11)'s L2) or ``"l2"`` (the L2 alone). The fits are not jitted as a whole here (the
@@ -31,6 +33,7 @@ from .basis import BasisFamily
 from .polynomial import PolynomialFamily
 from .shared import SharedShapeFamily
 from .skew import SkewBasisFamily
+from .sparse import SparseShapeFamily
 
 
 class Family(Protocol):
@@ -61,6 +64,7 @@ class Family(Protocol):
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (BasisFamily(), PolynomialFamily(), SkewBasisFamily(),
-                                                SharedShapeFamily())}
+                                                SharedShapeFamily(), SparseShapeFamily())}
 
-__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily", "SharedShapeFamily", "SkewBasisFamily"]
+__all__ = ["FAMILIES", "BasisFamily", "Family", "PolynomialFamily", "SharedShapeFamily", "SkewBasisFamily",
+           "SparseShapeFamily"]

@@ -95,8 +95,9 @@ class SharedShapeFamily(OnLearnedBasis):
         return out
 
     def candidates(self, budget: int) -> list[tuple[int, int, int]]:
-        """The configurations :func:`polyjax.fit_compact` may try within ``budget``: all of :meth:`configs`."""
-        return self.configs(budget)
+        """The configurations :func:`polyjax.fit_compact` may try within ``budget``: :meth:`candidate_chains`,
+        flattened."""
+        return [c for chain in self.candidate_chains(budget) for c in chain]
 
     def candidate_chains(self, budget: int) -> list[list[tuple[int, int, int]]]:
         """For each degree ``p`` the reciprocal configuration, then the one with skew rows: the choice walks a chain
