@@ -175,8 +175,9 @@ def old_default_worst(names, fit, score, n=5):
 
 
 def rgl_rows():
-    """Compact at 33 (shipped basis and polynomial, :func:`polyjax.fit_compact`) and the neural BRDF (675) against
-    the two RGL-EPFL measurements on held-out directions."""
+    """Compact at 33 (shipped basis and polynomial, :func:`polyjax.fit_compact`, the default metric ``"log"`` and
+    ``metric="l2"``, the paper's) and the neural BRDF (675) against the two RGL-EPFL measurements on held-out
+    directions."""
     root = pj.data_root()
     zip_path = root / "nbrdf_sztrajman2021" / "rgl_two_nbrdf.zip"
     out = {}
@@ -187,14 +188,16 @@ def rgl_rows():
         net = pj.data.load_nbrdf(zip_path, name)
         nb = net(score.u, score.v)
         nb = jnp.moveaxis(nb, -1, 0) if nb.shape[-1] == 3 else nb
-        t0 = time.perf_counter()
-        model = pj.fit_compact(fit, 33)
-        t = time.perf_counter() - t0
-        c_l2, c_lg = errors(score.values, model(score.u, score.v), score)
-        n_l2, n_lg = errors(score.values, nb, score)
-        out[name] = dict(compact=(float(c_l2), float(c_lg)), neural=(float(n_l2), float(n_lg)),
-                         choice=f"{model.family} {model.config!r} ({model.n_numbers})", seconds=t)
-        print(f"  RGL {name}: compact {out[name]['compact']} neural {out[name]['neural']}", flush=True)
+        out[name] = dict(neural=tuple(float(x) for x in errors(score.values, nb, score)))
+        for metric in ("log", "l2"):
+            t0 = time.perf_counter()
+            model = pj.fit_compact(fit, 33, metric=metric)
+            t = time.perf_counter() - t0
+            c_l2, c_lg = errors(score.values, model(score.u, score.v), score)
+            out[name][metric] = dict(errors=(float(c_l2), float(c_lg)), seconds=t,
+                                     choice=f"{model.family} {model.config!r} ({model.n_numbers})")
+            print(f"  RGL {name} metric={metric}: compact {out[name][metric]['errors']} "
+                  f"neural {out[name]['neural']}", flush=True)
     return out
 
 
@@ -349,16 +352,25 @@ def main():
 
 
 def rgl_lines(rgl):
-    lines = ["", "RGL-EPFL measurements, held-out directions (fit seed 11, score seed 12, 20,000 bins; shipped basis):",
-             "", "| material | compact at 33: L2, log | neural BRDF (675): L2, log | ratio L2, log | choice | fit s |",
-             "|---|---|---|---|---|---|"]
-    ok = True
+    lines = ["", "RGL-EPFL measurements, held-out directions (fit seed 11, score seed 12, 20,000 bins; shipped basis; "
+             "`pj.fit_compact(fit, 33)` and `pj.fit_compact(fit, 33, metric=\"l2\")`):", "",
+             "| material | fit's metric | compact at 33: L2, log | neural BRDF (675): L2, log | ratio L2, log | "
+             "choice | fit s |", "|---|---|---|---|---|---|---|"]
+    one, own = True, True
     for name, r in rgl.items():
-        q = (r["compact"][0] / r["neural"][0], r["compact"][1] / r["neural"][1])
-        ok &= max(q) <= 1.25
-        lines.append(f"| {name} | {r['compact'][0]:.4f}, {r['compact'][1]:.4f} | {r['neural'][0]:.4f}, "
-                     f"{r['neural'][1]:.4f} | {q[0]:.2f}x, {q[1]:.2f}x | {r['choice']} | {r['seconds']:.1f} |")
-    lines.append(f"- RGL within 1.25x of the neural BRDF on both metrics at 33: {'MET' if ok else 'NOT MET'}")
+        q = {}
+        for metric in ("log", "l2"):
+            c = r[metric]["errors"]
+            q[metric] = (c[0] / r["neural"][0], c[1] / r["neural"][1])
+            lines.append(f"| {name} | {metric} | {c[0]:.4f}, {c[1]:.4f} | {r['neural'][0]:.4f}, "
+                         f"{r['neural'][1]:.4f} | {q[metric][0]:.2f}x, {q[metric][1]:.2f}x | {r[metric]['choice']} | "
+                         f"{r[metric]['seconds']:.1f} |")
+        one &= max(q["log"]) <= 1.25
+        own &= q["l2"][0] <= 1.25 and q["log"][1] <= 1.25
+    lines.append(f"- RGL within 1.25x of the neural BRDF on both metrics at 33, one fit (the default): "
+                 f"{'MET' if one else 'NOT MET'}")
+    lines.append(f"- RGL within 1.25x of the neural BRDF at 33, each metric by the fit for it (L2 of "
+                 f"`metric=\"l2\"`, log of the default): {'MET' if own else 'NOT MET'}")
     return lines
 
 
