@@ -26,7 +26,9 @@ Fit time: the compact refit of the chosen configuration of one material after co
 choice (cross-validation of every candidate plus the refit) per material.
 
 Writes ``compact.md``, ``compact.csv``, ``compact_front.png`` and ``compact_spheres.png`` (measured, compact at 33,
-SGD: the five materials where the old defaults, Lafortune p = 5, do worst on the log metric) to ``--out``.
+SGD: the five materials where the old defaults, Lafortune p = 5, do worst on the log metric) to ``--out``, with
+each sphere's display-value error against the measured one (what a viewer of the PNG sees; ``--spheres-only``: the
+spheres alone, ``compact_spheres.md``).
 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact.py [--materials 10] [--out DIR]``
 """
@@ -233,7 +235,7 @@ def spheres(worst, names, fit, out_path):
     sgd = bl.published("sgd", worst)
     names_all, tables = lcb.material_tables()
     mass = lcb.node_weights()
-    grid = []
+    grid, labels = [], []
     for i, name in enumerate(worst):
         objects = loo_families(name, tables, mass, names_all)
         ch = pj.internal.choose_compact(fit[names.index(name)], 33, families=objects)
@@ -246,10 +248,30 @@ def spheres(worst, names, fit, out_path):
         sgd_brdf = pj.render.ParametricBRDF(lambda p, u, v, _m=model: jnp.stack(
             [_m.evaluate(p[c], u, v) for c in range(3)], -1), jnp.asarray(sgd[i]))
         grid.append([nets[name], compact, sgd_brdf])
+        labels.append(f"{ch.family} {ch.config!r}")
     res = pj.render.render_grid(grid, size=96)
     img = np.asarray(res.images)
     rows = [np.concatenate(list(r), axis=1) for r in img]
     pj.render.write_png(out_path, np.concatenate(rows, axis=0))
+    return sphere_errors(worst, labels, img, np.asarray(res.hit))
+
+
+def sphere_errors(worst, choices, img, hit):
+    """What the eye sees of the spheres: per material, the RMS over the sphere's pixels and R, G, B of the display
+    values (:func:`polyjax.render.to_srgb`, clip, the PNG's values in [0, 1]) of the compact and the SGD sphere
+    against the measured one; and the share of the sphere's pixels where either is off by more than 0.05."""
+    lines = ["", "Rendered spheres ([compact_spheres.png](compact_spheres.png)), display-value error against the "
+             "measured sphere (sRGB, clip; RMS over the sphere's pixels and R, G, B; share of pixels off by more "
+             "than 0.05):", "", "| material | compact at 33 (choice) | RMS, share > 0.05 | SGD: RMS, share > 0.05 |",
+             "|---|---|---|---|"]
+    for i, name in enumerate(worst):
+        ref = pj.render.to_srgb(img[i, 0])[hit]
+        cells = []
+        for j in (1, 2):
+            d = np.abs(pj.render.to_srgb(img[i, j])[hit] - ref)
+            cells.append(f"{np.sqrt(np.mean(d ** 2)):.4f}, {np.mean(d.max(-1) > 0.05):.1%}")
+        lines.append(f"| {name} | {choices[i]} | {cells[0]} | {cells[1]} |")
+    return lines
 
 
 def ratio_table(rows, pub, names, label):
@@ -304,6 +326,8 @@ def main():
     ap.add_argument("--no-baselines", action="store_true", help="skip the nonlinear baselines")
     ap.add_argument("--no-rgl", action="store_true", help="skip the RGL-EPFL measurements")
     ap.add_argument("--no-spheres", action="store_true", help="skip the rendered spheres")
+    ap.add_argument("--spheres-only", action="store_true",
+                    help="only the rendered spheres and their display-value errors (compact_spheres.md)")
     ap.add_argument("--out", default="compact_out")
     args = ap.parse_args()
     t_all = time.perf_counter()
@@ -311,6 +335,14 @@ def main():
     names = list(pj.data.MERL_NAMES[: args.materials])
     fit = pj.data.load_merl_nbrdf(names, subsample=args.samples, seed=11)
     score = pj.data.load_merl_nbrdf(names, subsample=args.samples, seed=12)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.spheres_only:
+        worst, _ = old_default_worst(names, fit, score)
+        text = "\n".join(spheres(worst, names, fit, out / "compact_spheres.png"))
+        print(text)
+        (out / "compact_spheres.md").write_text(text + "\n")
+        return
     print(f"{len(names)} MERL materials; fit on {fit.n_samples} bins (seed 11), scored on {score.n_samples} (seed 12)",
           flush=True)
     n_family = min(args.family_materials, len(names))
@@ -331,11 +363,11 @@ def main():
                      f"model's fit alone {alone:.3f} s: {'MET' if whole < 0.5 else 'NOT MET'} for the whole choice, "
                      f"{'MET' if alone < 0.5 else 'NOT MET'} for the fit")
     lines.append("- worst five materials of the old defaults (Lafortune p = 5, log metric): " + ", ".join(worst))
+    if not args.no_spheres:
+        lines += spheres(worst, names, fit, out / "compact_spheres.png")
     lines.append(f"\nTotal run time {time.perf_counter() - t_all:.0f} s.")
     text = "\n".join(lines)
     print(text)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     (out / "compact.md").write_text(text + "\n")
     write_csv(out / "compact.csv", names, rows, pub, base)
     front = {(label if label == "compact" else f"{label} (first {n_family})"):
@@ -347,8 +379,6 @@ def main():
     for label, (n, l2, lg, _) in base.items():
         front[label] = [(n, n, float(np.median(l2)), float(np.median(lg)))]
     front_figure(front, out / "compact_front.png")
-    if not args.no_spheres:
-        spheres(worst, names, fit, out / "compact_spheres.png")
 
 
 def rgl_lines(rgl):
