@@ -1,5 +1,7 @@
 """MERL .binary layout, Rusinkiewicz grid and index mapping, solid-angle weights, bad files."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -200,6 +202,24 @@ def test_nan_values(tmp_path):
     p.write_bytes(bytes(raw))
     with pytest.raises(NonFiniteValueError):
         pj.data.read_merl_binary(p)
+
+
+def test_opposite_infinities_and_huge_values_are_checked_without_a_numpy_warning(tmp_path):
+    """The finiteness check sums the body first: ``+inf`` and ``-inf`` together (a NaN sum) are a named error,
+    finite values whose sum overflows load, and neither lets numpy warn."""
+    p = tmp_path / "n.binary"
+    pj.data.write_merl_binary(p, smooth_table(), resolution=SMALL_RES)
+    raw = bytearray(p.read_bytes())
+    raw[12 + 8 * 4: 12 + 8 * 6] = np.array([np.inf, -np.inf], "<f8").tobytes()
+    p.write_bytes(bytes(raw))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(NonFiniteValueError, match="2 NaN/inf"):
+            pj.data.read_merl_binary(p)
+        raw[12 + 8 * 4: 12 + 8 * 6] = np.array([1e308, 1e308], "<f8").tobytes()
+        p.write_bytes(bytes(raw))
+        values, _ = pj.data.read_merl_binary(p, scaled=False)
+    assert values[0, 4] == 1e308 and np.all(np.isfinite(values))
 
 
 def test_errors_are_polyjax_errors():

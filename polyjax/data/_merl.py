@@ -324,7 +324,9 @@ def _read_raw(path, scratch: dict | None, on_header=None) -> tuple[np.ndarray, t
     if got != 3 * n:  # the file shrank while being read
         raise TruncatedFileError(path, f"{3 * n} float64 values", f"{got}")
     raw = raw.reshape(3, n)
-    if not np.isfinite(np.sum(raw)):  # a finite sum means every entry is finite; else find the culprits
+    with np.errstate(invalid="ignore", over="ignore"):  # inf - inf or an overflowing sum: then look entry by entry
+        total = np.sum(raw)
+    if not np.isfinite(total):  # a finite sum means every entry is finite; else find the culprits
         finite = np.isfinite(raw)
         if not finite.all():
             c, idx = np.argwhere(~finite)[0]
