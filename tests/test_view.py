@@ -332,6 +332,28 @@ def test_models_without_an_expression_are_tabulated_on_the_merl_grid(model):
         pj.view.as_items(["no-such.json"])
 
 
+
+def test_a_model_that_is_not_reciprocal_is_tabulated_over_the_whole_turn_of_phi_d():
+    """f(u, v) != f(v, u) cannot live in MERL's phi_d in [0, pi) (both orders of a pair read one bin: a seam on
+    the sphere): such a model's table has 2 N_p bins of phi_d, f(u, v) in the first N_p and f(v, u) in the rest;
+    a reciprocal one keeps N_p."""
+    import jax.numpy as jnp
+
+    def skewed(u, v):
+        return jnp.stack([0.2 + 0.3 * u[..., 2] * (1 - v[..., 2])] * 3, -1)  # light and view in different roles
+
+    res = (8, 8, 16)
+    items = pj.view.as_items([("skewed", skewed), ("matte", pj.render.Lambertian(0.6))], resolution=res)
+    assert not items[0].reciprocal and items[0].table.shape == (8, 8, 32, 3)
+    assert "whole turn" in items[0].info["shown as"]
+    assert items[1].reciprocal and items[1].table.shape == (8, 8, 16, 3)
+    u, v, _, above = pj.data.merl_grid(res)
+    for a, b, half in ((u, v, slice(0, 16)), (v, u, slice(16, 32))):
+        expected = np.where(above[:, None], np.asarray(skewed(a, b)), 0.0)
+        np.testing.assert_allclose(items[0].table[:, :, half].reshape(-1, 3), expected, rtol=1e-6, atol=1e-7)
+    assert "merl_lookup(table_0, vec3(8.0, 8.0, 32.0), u, v, 2.0 * PI)" in pj.view.page_html(items)
+    assert "merl_lookup(table_1, vec3(8.0, 8.0, 16.0), u, v, PI)" in pj.view.page_html(items)
+
 @pytest.mark.slow
 def test_report_html_is_a_page_of_the_reports_fits(browser, tmp_path, monkeypatch, capsys):
     from polyjax.cli import main

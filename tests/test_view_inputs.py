@@ -146,18 +146,29 @@ def test_rgl_file_is_a_table_of_its_bsdf_at_the_bin_centres(browser, tmp_path): 
     items = pj.view.as_items([f"rgl:{bsdf}"], resolution=res)
     assert [it.kind for it in items] == ["table"] and "centres of the 8x8x16" in items[0].info["shown as"]
     u, v, _, above = pj.data.merl_grid(res)
-    truth = np.asarray(pj.data.load_rgl(bsdf, directions=(u[above], v[above])).values).T
-    table = items[0].table.reshape(-1, 3)
-    np.testing.assert_allclose(table[above], truth, rtol=1e-6)
-    assert np.all(table[~above] == 0) and truth.max() > 0
+    # a measured BSDF need not be reciprocal (this one is not): phi_d over the whole turn, f(u, v) in the first
+    # 16 bins, f(v, u) in the next 16
+    assert not items[0].reciprocal and items[0].table.shape == (8, 8, 32, 3)
+    assert "whole turn" in items[0].info["shown as"]
+    halves = []
+    for a, b, half in ((u, v, slice(0, 16)), (v, u, slice(16, 32))):
+        truth = np.asarray(pj.data.load_rgl(bsdf, directions=(a[above], b[above])).values).T
+        table = items[0].table[:, :, half].reshape(-1, 3)
+        np.testing.assert_allclose(table[above], truth, rtol=1e-6)
+        assert np.all(table[~above] == 0) and truth.max() > 0
+        halves.append(table)
+    assert np.max(np.abs(halves[0] - halves[1])) > 1e-3 * np.max(halves[0])
     path = pj.view.write_page([f"rgl:{bsdf}"], tmp_path / "rgl.html", resolution=res,
                               settings=pj.view.ViewSettings(size=32))
     _open(browser, path)
-    # the page's look-up at bin centres away from the horizon: the table's values (float16 texels)
+    # the page's look-up at bin centres away from the horizon, both orders: the table's values (float16 texels;
+    # pairs in the plane of incidence among them, whose turned difference vector has y = -0.0)
     pick = np.flatnonzero(above & (u[:, 2] > 0.2) & (v[:, 2] > 0.2))[::7]
-    got = browser.evaluate(f"window.polyjaxView.evaluate(0, {u[pick].ravel().tolist()}, {v[pick].ravel().tolist()})")
     assert len(pick) > 40
-    np.testing.assert_allclose(np.asarray(got), table[pick], rtol=2e-3, atol=1e-5)
+    for (a, b), table in zip(((u, v), (v, u)), halves):
+        got = browser.evaluate(f"window.polyjaxView.evaluate(0, {a[pick].ravel().tolist()}, "
+                               f"{b[pick].ravel().tolist()})")
+        np.testing.assert_allclose(np.asarray(got), table[pick], rtol=2e-3, atol=1e-5)
     assert browser.errors() == []
 
 
@@ -168,7 +179,7 @@ def test_shared_rgl_file_by_name(tmp_path):
     out = tmp_path / "paper.html"
     assert main(["view", "rgl:paper_white_rgb", "--table-resolution", "6,6,12", "--out", str(out)]) == 0
     (item,) = _page_data(out)["items"]
-    assert item["kind"] == "table" and item["resolution"] == [6, 6, 12]
+    assert item["kind"] == "table" and item["resolution"] == [6, 6, 24]  # not reciprocal: the whole turn
     assert item["info"]["source"] == "RGL-EPFL measured BSDF paper_white_rgb"
 
 

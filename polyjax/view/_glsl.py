@@ -6,7 +6,9 @@ A ``"program"`` item's body is :meth:`polyjax.export._expr.Program.glsl_body`, t
 with ``merl_lookup`` (``viewer.js``): Rusinkiewicz angles of ``(u, v)`` (:func:`polyjax.data._merl.
 directions_to_rusinkiewicz`), continuous MERL indices ``sqrt(theta_h / (pi/2)) N_h``, ``theta_d / (pi/2) N_d``,
 ``phi_d / pi N_p`` (``phi_d`` folded into ``[0, pi)`` by reciprocity; the texture repeats along ``phi_d``),
-trilinear between bin centres. ``"points"`` items have no function (the dispatcher returns 0 for them).
+trilinear between bin centres; a table of a BRDF that is not reciprocal has ``phi_d`` over ``[0, 2 pi)``
+(``polyjax.view._items.with_both_orders``), read with the period ``2 pi``. ``"points"`` items have no function
+(the dispatcher returns 0 for them).
 """
 
 from __future__ import annotations
@@ -24,9 +26,10 @@ def _program_function(i: int, item: ViewItem) -> str:
 
 def _table_function(i: int, item: ViewItem) -> str:
     nh, nd, npd = item.table.shape[:3]
+    period = "PI" if item.reciprocal else "2.0 * PI"
     return (f"uniform highp sampler3D table_{i};\n"
             f"vec3 brdf_{i}(vec3 u, vec3 v) {{\n"
-            f"    return merl_lookup(table_{i}, vec3({nh}.0, {nd}.0, {npd}.0), u, v);\n}}\n")
+            f"    return merl_lookup(table_{i}, vec3({nh}.0, {nd}.0, {npd}.0), u, v, {period});\n}}\n")
 
 
 def brdf_functions(items: list[ViewItem]) -> str:

@@ -3,7 +3,9 @@ r"""An RGL-EPFL measured BSDF (``rgl:<file or name>``, :func:`polyjax.data.load_
 The file is a BRDF that evaluates anywhere, not a set of fixed samples: the page's table gets its values at the
 centres of the table's own bins, ``pj.data.load("rgl:...", directions=...)`` at the directions of
 :func:`polyjax.data.merl_grid` of the table's resolution (both above the horizon; 0 elsewhere), one sample per bin.
-A coarse table is thus the BRDF at its bin centres, not an average of a finer grid's.
+A coarse table is thus the BRDF at its bin centres, not an average of a finer grid's. The file is read at both
+orders of each pair: a measured BSDF need not be reciprocal, and one that is not gets a table over the whole turn
+of ``phi_d`` (:func:`polyjax.view._items.with_both_orders`).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import numpy as np
 import polyjax as pj
 
 from .._errors import InputError
-from ._items import MERL_RESOLUTION, ViewItem
+from ._items import MERL_RESOLUTION, ViewItem, _shown_as, with_both_orders
 
 
 def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem]:
@@ -26,10 +28,14 @@ def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem
     if len(data.channels) != 3:
         raise InputError(f"{spec!r}: a spectral file ({len(data.channels)} wavelengths); the page shows RGB: use "
                          "the material's *_rgb.bsdf file")
-    table = np.zeros((above.size, 3), np.float32)
-    table[above] = np.where(np.asarray(data.mask)[:, None], np.asarray(data.values).T, 0.0)
+    swapped = pj.data.load(spec, root=root, directions=(v[above], u[above]))  # f(v, u): the file need not be
+    tables = []                                                                # reciprocal (with_both_orders)
+    for d in (data, swapped):
+        table = np.zeros((above.size, 3), np.float32)
+        table[above] = np.where(np.asarray(d.mask)[:, None], np.asarray(d.values).T, 0.0)
+        tables.append(table.reshape(*resolution, 3))
+    table, reciprocal = with_both_orders(*tables)
     info = {"model": "measured data", "source": data.source, "samples": int(np.asarray(data.mask).sum()),
             "channels": list(data.channels),
-            "shown as": (f"table: the measured BSDF evaluated at the centres of the {'x'.join(map(str, resolution))} "
-                         "MERL bins above the horizon")}
-    return [ViewItem(data.names[0], "table", info, table=table.reshape(*resolution, 3), model=data)]
+            "shown as": _shown_as(resolution, reciprocal, "the measured BSDF evaluated") + " above the horizon"}
+    return [ViewItem(data.names[0], "table", info, table=table, model=data, reciprocal=reciprocal)]

@@ -40,7 +40,7 @@ const float PI = 3.14159265358979;
 vec3 srgb(vec3 x) { x = clamp(x, 0.0, 1.0);
   return mix(1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, 12.92 * x, vec3(lessThanEqual(x, vec3(0.0031308)))); }
 // Rusinkiewicz angles (polyjax.data._merl.directions_to_rusinkiewicz), continuous MERL indices, trilinear look-up
-vec3 merl_lookup(sampler3D t, vec3 n, vec3 u, vec3 v) {
+vec3 merl_lookup(sampler3D t, vec3 n, vec3 u, vec3 v, float period) {
   if (u.z <= 0.0 || v.z <= 0.0) return vec3(0.0);
   u = normalize(u); v = normalize(v);
   vec3 h = normalize(u + v);
@@ -48,9 +48,11 @@ vec3 merl_lookup(sampler3D t, vec3 n, vec3 u, vec3 v) {
   float cp = cos(ph), sp = sin(ph), ct = cos(th), st = sin(th);
   float x = cp * u.x + sp * u.y, y = -sp * u.x + cp * u.y, z = u.z;
   float dx = x * ct - z * st, dz = x * st + z * ct;
-  float td = atan(length(vec2(dx, y)), dz), pd = atan(y, dx);
-  if (pd < 0.0) pd += PI;
-  vec3 idx = vec3(pd / PI * n.z, td / (0.5 * PI) * n.y, sqrt(max(th, 0.0) / (0.5 * PI)) * n.x);
+  // y == 0.0 holds for -0.0 too: +0.0 then, so that a pair in the plane of incidence turned by pi reads pi, not
+  // -pi (which a table over the whole turn would put at 0)
+  float td = atan(length(vec2(dx, y)), dz), pd = atan(y == 0.0 ? 0.0 : y, dx);
+  if (pd < 0.0) pd += period;  // PI: folded by reciprocity; 2 PI: a table over the whole turn
+  vec3 idx = vec3(pd / period * n.z, td / (0.5 * PI) * n.y, sqrt(max(th, 0.0) / (0.5 * PI)) * n.x);
   return texture(t, (idx + 0.5) / vec3(n.z, n.y, n.x)).rgb;
 }
 `;
@@ -160,7 +162,7 @@ void main() { ivec2 p = ivec2(gl_FragCoord.xy);
       gl.texImage3D(gl.TEXTURE_3D, 0, gl.RGB16F, np, nd, nh, 0, gl.RGB, gl.HALF_FLOAT, new Uint16Array(bytes(it.table)));
       gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
       gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-      gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_WRAP_S, gl.REPEAT);  // phi_d: period pi (reciprocity)
+      gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_WRAP_S, gl.REPEAT);  // phi_d: periodic (pi, or 2 pi for a table over the whole turn)
       gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
       gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE);
       tables.push([i, 2 + tables.length]);
