@@ -158,6 +158,41 @@ def test_models_without_a_program_are_tabulated_and_batches_raise():
         ex.glsl(pj.fit_polynomial(data, variables="ward", degree=[2, 3]))
 
 
+
+def _skewed(u, v):
+    """A BRDF that is not reciprocal: light and view in different roles."""
+    return jnp.stack([0.2 + 0.3 * u[..., 2] * (1 - v[..., 2])] * 3, -1)
+
+
+def test_a_model_that_is_not_reciprocal_is_tabulated_over_the_whole_turn(tmp_path):
+    """MERL's nodes fold phi_d into [0, pi) by reciprocity, which gave f(u, v) for both orders of a pair (a seam
+    where phi_d folds): a model that is not reciprocal gets 2 N_p nodes over the whole turn, and the shader's
+    interpolation (pj.export.numpy_function, its numpy twin) gives each order its own value; a reciprocal one
+    keeps N_p."""
+    src, ct = ex.glsl(_skewed), ex.glsl(cook_torrance())
+    assert "const int NP = 64;" in src and "const float TURN = 2.0;" in src
+    assert "const int NP = 32;" in ct and "const float TURN = 1.0;" in ct
+    u, v = _directions()
+    keep = (u[:, 2] > 0.25) & (v[:, 2] > 0.25)
+    u, v = u[keep], v[keep]
+    f = ex.numpy_function(_skewed)  # the shader's table and interpolation, in numpy
+    gap = np.max(np.abs(_rgb(_skewed, u, v) - _rgb(_skewed, v, u)))
+    for a, b in ((u, v), (v, u)):
+        err = np.max(np.abs(f(a, b) - _rgb(_skewed, a, b)))
+        assert err < 0.1 * gap, (err, gap)  # interpolation error, far below the two orders' difference
+    # pairs in the plane of incidence, whose difference vector turned by pi has y = -0.0: still their own order
+    t = np.radians(40.0)
+    a, b = np.array([[np.sin(t), 0.0, np.cos(t)]]), np.array([[-np.sin(t / 2), -0.0, np.cos(t / 2)]])
+    for x, y in ((a, b), (b, a)):
+        assert np.max(np.abs(f(x, y) - _rgb(_skewed, x, y))) < 0.1 * gap
+    if GLSLANG is not None:
+        frag = tmp_path / "skewed.frag"
+        frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
+                        + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
+                          "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+        r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stdout + r.stderr
+
 # --------------------------------------------------------------------------- MERL
 
 

@@ -18,7 +18,7 @@ from .._files import check_output_path, write_bytes_atomically
 from .._model import PolynomialBRDF
 from ..data._nbrdf import NeuralBRDF
 from ._expr import program
-from ._glsl_table import check_function_name, comment_text, tabulated_glsl
+from ._glsl_table import check_function_name, comment_text, tabulated_glsl, tabulated_numpy
 
 _HEADER = "// polyjax {what}: variables={variables}, basis={basis}, degree={degree}, interactions={interactions}"
 
@@ -76,7 +76,11 @@ def brdf_explorer(model, path: str | os.PathLike) -> Path:
 
 
 def numpy_function(model):
-    """``f(u, v) -> (..., 3)`` in numpy, from the same program as :func:`glsl` (for checking exports)."""
+    """``f(u, v) -> (..., 3)`` in numpy, from the same program as :func:`glsl` (for checking exports); for a model
+    :func:`glsl` tabulates, the same table and interpolation (:func:`polyjax.export._glsl_table.tabulated_numpy`,
+    directions ``(n, 3)``)."""
+    if not _has_program(model):
+        return tabulated_numpy(model)
     fn = program(model).python_function("numpy")
 
     def f(u, v):

@@ -3,7 +3,9 @@ r"""GLSL of a tabulated BRDF: any model without an expression program (a ``basel
 
 The table holds ``max(f, 0)`` at the nodes of a coarse MERL grid (:func:`polyjax.export.tabulate_merl` at
 ``resolution = (N_h, N_d, N_p)``, default ``(16, 16, 32)``: node ``(i, j, k)`` at ``theta_h = (i / N_h)^2 pi / 2``,
-``theta_d = j / N_d pi / 2``, ``phi_d = k / N_p pi``), and the shader interpolates it trilinearly in the bin
+``theta_d = j / N_d pi / 2``, ``phi_d = k / N_p pi``; a BRDF that is not reciprocal gets ``2 N_p`` nodes over
+the whole turn, ``phi_d = k / N_p pi`` for ``k < 2 N_p``, :func:`polyjax.export._merl.whole_turn`: the shader's
+``TURN`` is then 2), and the shader interpolates it trilinearly in the bin
 coordinates exactly as the Mitsuba plugin does for such models (:mod:`polyjax.export._mitsuba`): ``sqrt`` of
 ``theta_h`` and ``theta_d`` clamped to the grid, ``phi_d`` periodic, nodes with a direction below the horizon left
 out of the weights. :func:`tabulated_numpy` is the same interpolation in numpy (what the tests compare with the
@@ -17,8 +19,7 @@ import re
 import numpy as np
 
 from .._errors import InputError
-from ..render._brdf import rgb_brdf
-from ._merl import tabulate_merl
+from ._merl import tabulate_both_orders
 
 #: the default table resolution (N_h, N_d, N_p): 8,192 nodes, 32,768 floats
 RESOLUTION = (16, 16, 32)
@@ -57,11 +58,11 @@ _BODY = """
     float dx = x * cos(th) - u.z * sin(th);
     float dz = x * sin(th) + u.z * cos(th);
     float td = atan(sqrt(dx * dx + y * y), dz);
-    float pd = atan(y, dx);
-    if (pd < 0.0) pd += PI;
+    float pd = atan(y == 0.0 ? 0.0 : y, dx);  // +0.0 for -0.0: a pair turned by pi reads pi, not -pi
+    if (pd < 0.0) pd += TURN * PI;
     float ci = sqrt(max(th, 0.0) / (PI / 2.0)) * float(NH);
     float cj = clamp(td, 0.0, PI / 2.0) / (PI / 2.0) * float(ND);
-    float ck = clamp(pd, 0.0, PI) / PI * float(NP);
+    float ck = clamp(pd, 0.0, TURN * PI) / (TURN * PI) * float(NP);
     int i0 = int(clamp(floor(ci), 0.0, float(NH - 2)));
     float wi = clamp(ci - float(i0), 0.0, 1.0);
     int j0 = int(clamp(floor(cj), 0.0, float(ND - 2)));
@@ -84,24 +85,28 @@ _BODY = """
 """
 
 
-def table(model, resolution=RESOLUTION) -> np.ndarray:
-    """``(4, N)``: ``max(f, 0)`` per channel at the nodes (file order), then 1 where both directions of the node are
-    above the horizon (0 elsewhere, the values there 0)."""
-    vals, above = tabulate_merl(rgb_brdf(model), tuple(resolution))
-    vals = np.where(above[None], np.maximum(np.asarray(vals, np.float64), 0.0), 0.0)
-    return np.concatenate([vals, above[None].astype(np.float64)])
+def table(model, resolution=RESOLUTION) -> tuple[np.ndarray, int]:
+    """``((4, N), turn)``: ``max(f, 0)`` per channel at the nodes (file order), then 1 where both directions of the
+    node are above the horizon (0 elsewhere, the values there 0); ``turn`` 2 for a table over the whole turn of
+    ``phi_d`` (``N = 2 N_h N_d N_p``, a BRDF that is not reciprocal), else 1."""
+    vals, above, turn = tabulate_both_orders(model, tuple(resolution))
+    vals = np.where(above[None], np.maximum(vals, 0.0), 0.0).reshape(3, -1)
+    return np.concatenate([vals, above.reshape(1, -1).astype(np.float64)]), 2 if turn else 1
 
 
 def tabulated_glsl(model, name: str = "BRDF", resolution=RESOLUTION) -> str:
     """GLSL source of ``vec3 name(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` interpolating ``model``'s table."""
     check_function_name(name)
     nh, nd, npd = (int(r) for r in resolution)
-    t = table(model, resolution)
+    t, turn = table(model, resolution)
+    npd *= turn
     data = ",".join(f"{x:.9g}" for x in t.ravel())
     header = (f"// polyjax tabulated BRDF ({comment_text(type(model).__name__)} "
               f"{comment_text(getattr(model, 'name', ''))}): max(f, 0) at "
-              f"{nh}x{nd}x{npd} Rusinkiewicz nodes, trilinear")
+              f"{nh}x{nd}x{npd} Rusinkiewicz nodes, trilinear"
+              + ("; not reciprocal: phi_d over the whole turn" if turn == 2 else ""))
     return (f"{header}\nconst int NH = {nh};\nconst int ND = {nd};\nconst int NP = {npd};\n"
+            f"const float TURN = {turn}.0;\n"
             f"const int NN = {nh * nd * npd};\nconst float TABLE[{t.size}] = float[{t.size}]({data});\n"
             f"vec3 {name}(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)\n{{{_BODY}}}\n")
 
@@ -109,7 +114,8 @@ def tabulated_glsl(model, name: str = "BRDF", resolution=RESOLUTION) -> str:
 def tabulated_numpy(model, resolution=RESOLUTION):
     """``f(u, v) -> (n, 3)``: the interpolation of :func:`tabulated_glsl` in numpy (float64), local frame."""
     nh, nd, npd = (int(r) for r in resolution)
-    t = table(model, resolution)
+    t, turn = table(model, resolution)
+    npd *= turn
 
     def f(u, v):
         u = np.asarray(u, np.float64) / np.linalg.norm(u, axis=-1, keepdims=True)
@@ -122,11 +128,11 @@ def tabulated_numpy(model, resolution=RESOLUTION):
         sp = np.where(ok, h[:, 1] / np.where(ok, rh, 1), 0.0)
         x, y = cp * u[:, 0] + sp * u[:, 1], -sp * u[:, 0] + cp * u[:, 1]
         dx, dz = x * np.cos(th) - u[:, 2] * np.sin(th), x * np.sin(th) + u[:, 2] * np.cos(th)
-        td, pd = np.arctan2(np.hypot(dx, y), dz), np.arctan2(y, dx)
-        pd = np.where(pd < 0, pd + np.pi, pd)
+        td, pd = np.arctan2(np.hypot(dx, y), dz), np.arctan2(np.where(y == 0.0, 0.0, y), dx)
+        pd = np.where(pd < 0, pd + turn * np.pi, pd)
         ci = np.sqrt(np.maximum(th, 0) / (np.pi / 2)) * nh
         cj = np.clip(td, 0, np.pi / 2) / (np.pi / 2) * nd
-        ck = np.clip(pd, 0, np.pi) / np.pi * npd
+        ck = np.clip(pd, 0, turn * np.pi) / (turn * np.pi) * npd
         i0 = np.clip(np.floor(ci), 0, nh - 2).astype(int)
         j0 = np.clip(np.floor(cj), 0, nd - 2).astype(int)
         wi, wj = np.clip(ci - i0, 0, 1), np.clip(cj - j0, 0, 1)

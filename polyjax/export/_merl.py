@@ -39,6 +39,37 @@ def _evaluate(brdf, u, v):
     return out.reshape(m, 3)[:n]
 
 
+#: a table whose two orders of the directions differ by more than this (relative to its largest value) is not
+#: reciprocal (:func:`whole_turn`)
+RECIPROCITY_TOL = 1e-6
+
+
+def whole_turn(table, swapped, axis: int = -1) -> tuple[np.ndarray, bool]:
+    """A table of ``f(u, v)`` at the MERL bins and ``swapped``, the same of ``f(v, u)``, ``phi_d`` along ``axis``:
+    ``(table, False)`` when they agree to :data:`RECIPROCITY_TOL` of the largest value (a reciprocal BRDF: MERL's
+    ``phi_d`` in ``[0, pi)`` holds it), else ``(both, True)``, ``both`` the two joined along ``axis``: ``phi_d``
+    over the whole turn ``[0, 2 pi)``, bin ``k + N_p`` holding ``f(v, u)`` of bin ``k`` (swapping the directions
+    keeps the half vector and turns the difference vector by ``pi``, Rusinkiewicz). Tables of the viewer and the
+    GLSL export of a BRDF that is not reciprocal (a compact model's skew rows, an RGL-EPFL file) are such."""
+    table, swapped = np.asarray(table), np.asarray(swapped)
+    scale = float(np.max(np.abs(table), initial=0.0))
+    if float(np.max(np.abs(table - swapped), initial=0.0)) <= RECIPROCITY_TOL * max(scale, 1e-30):
+        return table, False
+    return np.concatenate([table, swapped], axis=axis), True
+
+
+def tabulate_both_orders(brdf, resolution=MERL_RESOLUTION) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(values (3, N_h, N_d, N_p'), above (N_h, N_d, N_p'), turn)``: :func:`tabulate_merl` of ``f(u, v)`` and of
+    ``f(v, u)`` joined by :func:`whole_turn` (``N_p' = 2 N_p`` and ``turn`` True for a BRDF that is not
+    reciprocal), numpy float64."""
+    brdf = rgb_brdf(brdf)
+    res = tuple(int(r) for r in resolution)
+    (a, above), (b, _) = (tabulate_merl(m, res) for m in (brdf, lambda u, v: evaluate_rgb(brdf, v, u)))
+    values, turn = whole_turn(np.asarray(a, np.float64).reshape(3, *res), np.asarray(b, np.float64).reshape(3, *res))
+    above = np.asarray(above).reshape(res)
+    return values, (np.concatenate([above, above], -1) if turn else above), turn
+
+
 def tabulate_merl(brdf, resolution=MERL_RESOLUTION, dtype=jnp.float64) -> tuple[Float[Array, "3 n"], np.ndarray]:
     """``(values (3, N), valid (N,))``: ``brdf`` (any model :func:`polyjax.render.rgb_brdf` accepts) at the bin
     centres of the MERL grid in file order, and where both directions are above the horizon.

@@ -7,7 +7,7 @@ with ``merl_lookup`` (``viewer.js``): Rusinkiewicz angles of ``(u, v)`` (:func:`
 directions_to_rusinkiewicz`), continuous MERL indices ``sqrt(theta_h / (pi/2)) N_h``, ``theta_d / (pi/2) N_d``,
 ``phi_d / pi N_p`` (``phi_d`` folded into ``[0, pi)`` by reciprocity; the texture repeats along ``phi_d``),
 trilinear between bin centres; a table of a BRDF that is not reciprocal has ``phi_d`` over ``[0, 2 pi)``
-(``polyjax.view._items.with_both_orders``), read with the period ``2 pi``. ``"points"`` items have no function
+(``polyjax.export._merl.whole_turn``), read with the period ``2 pi``. ``"points"`` items have no function
 (the dispatcher returns 0 for them).
 """
 

@@ -28,8 +28,7 @@ from .._model import PolynomialBRDF
 from ..data._merl import directions_to_rusinkiewicz, merl_index
 from ..data._nbrdf import NeuralBRDF
 from ..export._expr import program
-from ..export._merl import tabulate_merl
-from ..render._brdf import evaluate_rgb, rgb_brdf
+from ..export._merl import tabulate_both_orders
 
 #: the MERL grid (theta_h, theta_d, phi_d bins), the default resolution of tables
 MERL_RESOLUTION = (90, 90, 180)
@@ -37,9 +36,6 @@ MERL_RESOLUTION = (90, 90, 180)
 DENSE_FRACTION = 0.2
 #: at most this many items from one argument (materials of a batched model or data set)
 MAX_LANES = 8
-#: a table whose two orders of the directions differ by more than this (relative to its largest value) is not
-#: reciprocal: its ``phi_d`` axis covers ``[0, 2 pi)`` (:func:`with_both_orders`)
-RECIPROCITY_TOL = 1e-6
 
 
 @dataclasses.dataclass
@@ -52,7 +48,7 @@ class ViewItem:
         info: the numbers shown beside the views (model, parameters, L2, source, notes): JSON values.
         program: the expression program (kind ``"program"``).
         table: float32 ``(N_h, N_d, N_p, 3)`` BRDF values in 1/sr (kind ``"table"``); ``(N_h, N_d, 2 N_p, 3)``,
-            ``phi_d`` over the whole turn, for a BRDF that is not reciprocal (:func:`with_both_orders`).
+            ``phi_d`` over the whole turn, for a BRDF that is not reciprocal (:func:`polyjax.export._merl.whole_turn`).
         u, v, values: float32 ``(n, 3)``, ``(n, 3)``, ``(n, 3)`` samples (kind ``"points"``).
         model: the Python model, kept for callers that compare with the page (not written into it).
         capture: the :class:`polyjax.Capture` whose photographs the page shows (a capture's ``"points"`` item,
@@ -177,18 +173,6 @@ def model_items(model, name: str, resolution=MERL_RESOLUTION, metadata: dict | N
     return items
 
 
-def with_both_orders(table: np.ndarray, swapped: np.ndarray) -> tuple[np.ndarray, bool]:
-    """A table ``(N_h, N_d, N_p, 3)`` of ``f(u, v)`` at the MERL bin centres and ``swapped``, the same of
-    ``f(v, u)``: ``(table, True)`` when they agree (a reciprocal BRDF: MERL's ``phi_d`` in ``[0, pi)`` holds it),
-    else ``((N_h, N_d, 2 N_p, 3), False)``, ``phi_d`` over ``[0, 2 pi)``: swapping the directions keeps the half
-    vector and turns the difference vector by ``pi`` (Rusinkiewicz), so bin ``k + N_p`` holds ``f(v, u)`` of bin
-    ``k``. The page's look-up (``merl_lookup``) reads a table of ``2 N_p`` bins over the whole turn."""
-    scale = float(np.max(np.abs(table), initial=0.0))
-    if float(np.max(np.abs(table - swapped), initial=0.0)) <= RECIPROCITY_TOL * max(scale, 1e-30):
-        return table, True
-    return np.concatenate([table, swapped], axis=2), False
-
-
 def _shown_as(resolution, reciprocal: bool, what: str) -> str:
     turn = "" if reciprocal else (f"; not reciprocal: phi_d over the whole turn, {2 * resolution[2]} bins, "
                                   "f(u, v) and f(v, u) each in its own")
@@ -196,10 +180,8 @@ def _shown_as(resolution, reciprocal: bool, what: str) -> str:
 
 
 def _tabulated(model, name: str, resolution, info=None, why="no GLSL expression for this model") -> ViewItem:
-    brdf = rgb_brdf(model)
-    tables = [np.asarray(tabulate_merl(m, resolution)[0], np.float32).T.reshape(*resolution, 3)
-              for m in (brdf, lambda u, v: evaluate_rgb(brdf, v, u))]
-    table, reciprocal = with_both_orders(*tables)
+    values, _, turn = tabulate_both_orders(model, resolution)
+    table, reciprocal = np.moveaxis(values, 0, -1).astype(np.float32), not turn
     if info is None:
         info = _fit_info(model) if hasattr(model, "params") else {"model": type(model).__name__}
     info["shown as"] = _shown_as(resolution, reciprocal, "tabulated") + f" ({why})"

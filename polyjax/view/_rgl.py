@@ -5,7 +5,7 @@ centres of the table's own bins, ``pj.data.load("rgl:...", directions=...)`` at 
 :func:`polyjax.data.merl_grid` of the table's resolution (both above the horizon; 0 elsewhere), one sample per bin.
 A coarse table is thus the BRDF at its bin centres, not an average of a finer grid's. The file is read at both
 orders of each pair: a measured BSDF need not be reciprocal, and one that is not gets a table over the whole turn
-of ``phi_d`` (:func:`polyjax.view._items.with_both_orders`).
+of ``phi_d`` (:func:`polyjax.export._merl.whole_turn`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import numpy as np
 import polyjax as pj
 
 from .._errors import InputError
-from ._items import MERL_RESOLUTION, ViewItem, _shown_as, with_both_orders
+from ..export._merl import whole_turn
+from ._items import MERL_RESOLUTION, ViewItem, _shown_as
 
 
 def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem]:
@@ -29,12 +30,13 @@ def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem
         raise InputError(f"{spec!r}: a spectral file ({len(data.channels)} wavelengths); the page shows RGB: use "
                          "the material's *_rgb.bsdf file")
     swapped = pj.data.load(spec, root=root, directions=(v[above], u[above]))  # f(v, u): the file need not be
-    tables = []                                                                # reciprocal (with_both_orders)
+    tables = []                                                                # reciprocal (whole_turn)
     for d in (data, swapped):
         table = np.zeros((above.size, 3), np.float32)
         table[above] = np.where(np.asarray(d.mask)[:, None], np.asarray(d.values).T, 0.0)
         tables.append(table.reshape(*resolution, 3))
-    table, reciprocal = with_both_orders(*tables)
+    table, turn = whole_turn(*tables, axis=2)
+    reciprocal = not turn
     info = {"model": "measured data", "source": data.source, "samples": int(np.asarray(data.mask).sum()),
             "channels": list(data.channels),
             "shown as": _shown_as(resolution, reciprocal, "the measured BSDF evaluated") + " above the horizon"}
