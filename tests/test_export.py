@@ -64,6 +64,14 @@ def _directions(n=4000, seed=0):
     return w[0], w[1]
 
 
+def _compile_glsl(src, path):
+    """``glslangValidator`` on a fragment shader calling ``BRDF`` from ``src``: the completed process."""
+    path.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
+                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
+                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
+    return subprocess.run([GLSLANG, str(path)], capture_output=True, text=True)
+
+
 def _rgb(model, u, v):
     return np.asarray(pj.render.evaluate_rgb(pj.render.rgb_brdf(model), jnp.asarray(u), jnp.asarray(v)))
 
@@ -98,11 +106,7 @@ def test_glsl_of_neural_model_compiles(tmp_path):
     path = ex.brdf_explorer(neural(), tmp_path / "neural.brdf")
     src = ex.glsl(neural())
     assert src.strip() in path.read_text()
-    frag = tmp_path / "neural.frag"
-    frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
-                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
-                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
-    r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+    r = _compile_glsl(src, tmp_path / "neural.frag")
     assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -124,11 +128,7 @@ def test_numpy_print_detects_a_changed_coefficient():
 def test_glsl_compiles(name, tmp_path):
     src = ex.glsl(MODELS[name])
     assert "vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)" in src
-    frag = tmp_path / "brdf.frag"
-    frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
-                    + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
-                      "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
-    r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+    r = _compile_glsl(src, tmp_path / "brdf.frag")
     assert r.returncode == 0, r.stdout + r.stderr
 
 
@@ -186,11 +186,7 @@ def test_a_model_that_is_not_reciprocal_is_tabulated_over_the_whole_turn(tmp_pat
     for x, y in ((a, b), (b, a)):
         assert np.max(np.abs(f(x, y) - _rgb(_skewed, x, y))) < 0.1 * gap
     if GLSLANG is not None:
-        frag = tmp_path / "skewed.frag"
-        frag.write_text("#version 330\nin vec3 L_; in vec3 V_;\nout vec4 colour;\n" + src
-                        + "void main() { colour = vec4(BRDF(normalize(L_), normalize(V_), vec3(0.0, 0.0, 1.0), "
-                          "vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)), 1.0); }\n")
-        r = subprocess.run([GLSLANG, str(frag)], capture_output=True, text=True)
+        r = _compile_glsl(src, tmp_path / "skewed.frag")
         assert r.returncode == 0, r.stdout + r.stderr
 
 # --------------------------------------------------------------------------- MERL
