@@ -365,10 +365,13 @@ def test_mitsuba_scalar_variant_samples_with_polyjax_density():
 
 
 @pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_rgb"])
-@pytest.mark.parametrize("make", [cook_torrance, ward], ids=["cook-torrance", "ward"])
+@pytest.mark.parametrize("make", [cook_torrance, ward, lambda: _skewed],
+                         ids=["cook-torrance", "ward", "not-reciprocal"])
 def test_mitsuba_eval_of_tabulated_model_matches_model(variant, make):
     """Baselines are interpolated trilinearly in the MERL bins: within 1 % of the lobe's peak everywhere, 2 % of
-    the value at 99 % of the directions (a nearest-bin lookup is off by 40 % of the peak for Cook-Torrance)."""
+    the value at 99 % of the directions (a nearest-bin lookup is off by 40 % of the peak for Cook-Torrance); a
+    model that is not reciprocal too (its table over the whole turn of phi_d: folded, half the pairs would read
+    the other order's value)."""
     mi = _mitsuba(variant)
     import drjit as dr
 

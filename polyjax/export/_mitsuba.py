@@ -9,9 +9,10 @@ instance; ``mi.load_dict({"type": "polyjax"})`` then builds it inside scenes. Co
 - **Evaluation**: a polynomial model or a ``NeuralBRDF`` is the Dr.Jit print of the one program of
   :mod:`polyjax.export._expr` (the same arithmetic as the GLSL and numpy exports), so Mitsuba evaluates the model
   itself; any other model (baselines, ``TabulatedBRDF``, closures) is tabulated at the nodes of the MERL grid
-  (:func:`tabulate_merl`, 90 x 90 x 180 Rusinkiewicz bins) and interpolated trilinearly in the bin coordinates
-  (``sqrt`` of ``theta_h``, ``theta_d``, ``phi_d`` periodic), nodes with a direction below the horizon left out
-  of the weights: continuous, an approximation at MERL's resolution.
+  (:func:`tabulate_merl`, 90 x 90 x 180 Rusinkiewicz bins; 360 bins of ``phi_d`` over the whole turn for a model
+  that is not reciprocal, :func:`polyjax.export._merl.whole_turn`) and interpolated trilinearly in the bin
+  coordinates (``sqrt`` of ``theta_h``, ``theta_d``, ``phi_d`` periodic), nodes with a direction below the horizon
+  left out of the weights: continuous, an approximation at MERL's resolution.
 - **Sampling**: the tables of :class:`polyjax.render.ImportanceSampler` (same map, mixture and density as
   polyjax's own sampler, :mod:`polyjax.render._sampling`), so ``pdf`` is exactly the density ``sample`` draws
   from, up to float32: ``sample1`` chooses the cosine component (probability ``alpha``), then is rescaled to
@@ -33,7 +34,7 @@ from ..data._nbrdf import NeuralBRDF
 from ..render._brdf import rgb_brdf
 from ..render._sampling import ImportanceSampler, importance_sampler
 from ._expr import program
-from ._merl import tabulate_merl
+from ._merl import tabulate_both_orders
 from ._mitsuba_name import check_plugin_name
 
 
@@ -72,9 +73,10 @@ class _Table:
 # --------------------------------------------------------------------------- evaluation of tabulated models
 
 
-def _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz):
-    """``(theta_h, theta_d, phi_d)`` of light ``u`` and view ``v`` in Dr.Jit, ``phi_d`` folded into ``[0, pi)``
-    (the MERL convention: ``f`` is symmetric under ``phi_d -> phi_d + pi``)."""
+def _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz, period):
+    """``(theta_h, theta_d, phi_d)`` of light ``u`` and view ``v`` in Dr.Jit, ``phi_d`` in ``[0, period)``:
+    ``pi`` folds it by reciprocity (the MERL convention: ``f`` is symmetric under ``phi_d -> phi_d + pi``),
+    ``2 pi`` keeps the whole turn (a table of a model that is not reciprocal)."""
     hx, hy, hz = ux + vx, uy + vy, uz + vz
     inv = dr.rsqrt(dr.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
     hx, hy, hz = hx * inv, hy * inv, hz * inv
@@ -87,7 +89,7 @@ def _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz):
     dx, dz = x * ct - uz * st, x * st + uz * ct
     td = dr.atan2(dr.sqrt(dx * dx + y * y), dz)
     pd = dr.atan2(y, dx)
-    pd = dr.select(pd < 0, pd + dr.pi, pd)
+    pd = dr.select(pd < 0, pd + period, pd)
     return th, td, pd
 
 
@@ -96,14 +98,16 @@ def _tabulated_eval(mi, dr, brdf):
 
     Node ``(i, j, k)`` sits at ``theta_h = (i / N_h)^2 pi / 2``, ``theta_d = j / N_d pi / 2``, ``phi_d = k / N_p
     pi`` (the bin angles of :func:`polyjax.data.merl_grid`), so the coordinates are ``sqrt(theta_h / (pi / 2))
-    N_h``, ``theta_d / (pi / 2) N_d`` (both clamped to the grid) and ``phi_d / pi N_p`` (periodic). The value is
+    N_h``, ``theta_d / (pi / 2) N_d`` (both clamped to the grid) and ``phi_d / pi N_p`` (periodic; ``phi_d / (2 pi)
+    2 N_p`` for a table over the whole turn, :func:`polyjax.export._merl.whole_turn`). The value is
     ``sum_c w_c m_c f_c / sum_c w_c m_c`` over the 8 corners, ``w`` the trilinear weights and ``m`` 1 where both
     directions of the node are above the horizon (``f`` is then ``max(f, 0)`` there) and 0 elsewhere.
     """
-    nh, nd, npd = MERL_RESOLUTION
-    vals, above = tabulate_merl(brdf)
-    vals = np.where(above[None], np.asarray(vals, np.float64), 0.0)
-    tables = [_Table(mi, dr, c) for c in vals] + [_Table(mi, dr, above.astype(np.float64))]
+    vals, above, turn = tabulate_both_orders(brdf, MERL_RESOLUTION)
+    nh, nd, npd = above.shape
+    period = 2.0 * np.pi if turn else np.pi
+    vals = np.where(above[None], vals, 0.0).reshape(3, -1)
+    tables = [_Table(mi, dr, c) for c in vals] + [_Table(mi, dr, above.reshape(-1).astype(np.float64))]
 
     def axis(c, n, periodic):
         c0 = dr.floor(c)
@@ -115,10 +119,10 @@ def _tabulated_eval(mi, dr, brdf):
         return (c0, c0 + 1), dr.clip(c - c0, 0.0, 1.0)
 
     def f(ux, uy, uz, vx, vy, vz):
-        th, td, pd = _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz)
+        th, td, pd = _rusinkiewicz(dr, ux, uy, uz, vx, vy, vz, period)
         (i0, i1), wi = axis(dr.sqrt(dr.maximum(th, 0.0) / (dr.pi / 2)) * nh, nh, False)
         (j0, j1), wj = axis(dr.clip(td, 0.0, dr.pi / 2) / (dr.pi / 2) * nd, nd, False)
-        (k0, k1), wk = axis(dr.clip(pd, 0.0, dr.pi) / dr.pi * npd, npd, True)
+        (k0, k1), wk = axis(dr.clip(pd, 0.0, period) / period * npd, npd, True)
         acc = [0.0 * wi for _ in tables]
         for i, a in ((i0, 1.0 - wi), (i1, wi)):
             for j, b in ((j0, 1.0 - wj), (j1, wj)):
