@@ -25,19 +25,22 @@ def rgl_items(spec: str, root=None, resolution=MERL_RESOLUTION) -> list[ViewItem
     every ``phi_d`` bin has the same directions)."""
     resolution = tuple(int(n) for n in resolution)
     u, v, _, above = pj.data.merl_grid(resolution)
-    data = pj.data.load(spec, root=root, directions=(u[above], v[above]))
+    a, b = u[above], v[above]
+    n = len(a)
+    # both orders of each pair in one read of the file, f(u, v) then f(v, u): it need not be reciprocal (whole_turn)
+    data = pj.data.load(spec, root=root, directions=(np.concatenate([a, b]), np.concatenate([b, a])))
     if len(data.channels) != 3:
         raise InputError(f"{spec!r}: a spectral file ({len(data.channels)} wavelengths); the page shows RGB: use "
                          "the material's *_rgb.bsdf file")
-    swapped = pj.data.load(spec, root=root, directions=(v[above], u[above]))  # f(v, u): the file need not be
-    tables = []                                                                # reciprocal (whole_turn)
-    for d in (data, swapped):
+    values = np.where(np.asarray(data.mask)[:, None], np.asarray(data.values).T, 0.0)
+    tables = []
+    for half in (slice(0, n), slice(n, 2 * n)):
         table = np.zeros((above.size, 3), np.float32)
-        table[above] = np.where(np.asarray(d.mask)[:, None], np.asarray(d.values).T, 0.0)
+        table[above] = values[half]
         tables.append(table.reshape(*resolution, 3))
     table, turn = whole_turn(*tables, axis=2)
     reciprocal = not turn
-    info = {"model": "measured data", "source": data.source, "samples": int(np.asarray(data.mask).sum()),
+    info = {"model": "measured data", "source": data.source, "samples": int(np.asarray(data.mask)[:n].sum()),
             "channels": list(data.channels),
             "shown as": _shown_as(resolution, reciprocal, "the measured BSDF evaluated") + " above the horizon"}
     return [ViewItem(data.names[0], "table", info, table=table, model=data, reciprocal=reciprocal)]
