@@ -122,7 +122,7 @@ SLOW_TESTS = frozenset({
     "test_svbrdf.py::test_texels_recover_their_material",  # 6 s
     "test_tabulate.py::test_tabulate_baseline_fit_and_bad_input",  # 13 s
     "test_tabulate.py::test_tabulate_is_differentiable_in_the_model",  # 5 s
-    "test_user_defects_2.py::test_readme_first_code_block_runs_as_written",  # 15 s
+    "test_user_defects_2.py::test_readme_code_blocks_run_as_written",  # 110 s: the tour, photographs included
     "test_view.py::test_environment_map_lights_the_sphere_by_quadrature",  # 6 s
     "test_view.py::test_every_view_loads_offline_without_console_errors",  # 11 s
     "test_view.py::test_report_html_is_a_page_of_the_reports_fits",  # 10 s

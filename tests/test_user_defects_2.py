@@ -286,19 +286,30 @@ def test_interactions_p7_on_curet_25_is_reported_ill_conditioned_in_both_bases(c
     assert rec["condition"][0] < 100 and not any("ill-conditioned" in w for w in rec["warnings"])
 
 
-# ---------------------------------------------------------------- 16: README's first code block runs
+# ---------------------------------------------------------------- 16: README's code blocks run
 @pytest.mark.data
 @pytest.mark.slow
-def test_readme_first_code_block_runs_as_written(tmp_path, monkeypatch, data_root):
+def test_readme_code_blocks_run_as_written(tmp_path, monkeypatch, data_root):
+    """Every Python block of README's tour, in order and in one scope (a block uses the names of those before it),
+    in a folder where the tour's relative paths name the data (``catPNG``: DiLiGenT's cat)."""
     from pathlib import Path
 
     text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    block = text.split("```python\n", 1)[1].split("```", 1)[0]
-    monkeypatch.chdir(tmp_path)  # it saves quarry.npz
+    blocks = [part.split("```", 1)[0] for part in text.split("```python\n")[1:]]
+    assert len(blocks) == 4, "README's tour has changed: say here what each block must give"
+    monkeypatch.chdir(tmp_path)  # the tour writes fits.npz, gold.npz and cat.glb
+    os.symlink(Path(data_root) / "diligent" / "crop8" / "catPNG", tmp_path / "catPNG")
     scope = {}
-    exec(compile(block, "README.md", "exec"), scope)  # noqa: S102 - the documentation's own example
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), scope)  # noqa: S102 - the documentation's own example
     assert scope["model"].l2.shape == (61,) and scope["models"].l2.shape == (5, 61)
     assert scope["grads"].shape == scope["data"].values.shape
+    best = scope["best"]
+    assert best.n_numbers <= 33 and float(best.log) < 0.05
+    assert pj.load_model(tmp_path / "gold.npz").n_numbers == best.n_numbers
+    cat = scope["cat"]
+    assert cat.normals.shape == (*cat.diffuse.shape[:2], 3) and (tmp_path / "cat.glb").stat().st_size > 10_000
+    assert scope["image"].shape == (128, 128, 3) and np.all(np.isfinite(np.asarray(scope["image"])))
 
 
 def test_multi_degree_header_gives_the_degrees_then_their_parameter_counts(capsys, no_data):
