@@ -2,6 +2,7 @@
 MERL .binary round trip, the Mitsuba 3 plugin (chi-square, evaluation, a rendered sphere against polyjax's)."""
 
 import glob
+import logging
 import os
 import shutil
 import subprocess
@@ -469,6 +470,30 @@ def test_cli_export_every_format(tmp_path, capsys):
     assert (tmp_path / "red.glsl").read_text() == ex.glsl(model[0])
     assert main(["export", str(src), "--to", "glsl", "--index", "5"]) == 2
     assert "--index" in capsys.readouterr().err
+
+
+def test_tabulate_merl_swap_gives_the_other_order_with_the_same_program():
+    """``swap=True`` tabulates ``f(v, u)`` at the bins (the other order of each pair, as a model with its
+    arguments exchanged gives it), by the program already compiled for ``f(u, v)``: no second compilation."""
+    res = (6, 6, 12)
+    direct, valid = ex.tabulate_merl(_skewed, res)
+    swapped, valid_s = ex.tabulate_merl(_skewed, res, swap=True)
+    by_hand, _ = ex.tabulate_merl(lambda u, v: _skewed(v, u), res)
+    np.testing.assert_array_equal(valid, valid_s)
+    np.testing.assert_allclose(np.asarray(swapped), np.asarray(by_hand), rtol=0, atol=1e-15)
+    assert float(jnp.max(jnp.abs(swapped - direct))) > 0.05  # the model is not reciprocal: the orders differ
+    ct = cook_torrance()
+    ex.tabulate_merl(ct, res)
+    with jax.log_compiles():
+        records = []
+        handler = logging.Handler()
+        handler.emit = records.append
+        logging.getLogger("jax").addHandler(handler)
+        try:
+            ex.tabulate_merl(ct, res, swap=True)
+        finally:
+            logging.getLogger("jax").removeHandler(handler)
+    assert not [r for r in records if "Compiling" in r.getMessage()], [r.getMessage() for r in records]
 
 
 def test_tabulate_merl_is_differentiable():

@@ -64,20 +64,23 @@ def tabulate_both_orders(brdf, resolution=MERL_RESOLUTION) -> tuple[np.ndarray, 
     reciprocal), numpy float64."""
     brdf = rgb_brdf(brdf)
     res = tuple(int(r) for r in resolution)
-    (a, above), (b, _) = (tabulate_merl(m, res) for m in (brdf, lambda u, v: evaluate_rgb(brdf, v, u)))
+    (a, above), (b, _) = (tabulate_merl(brdf, res, swap=swap) for swap in (False, True))
     values, turn = whole_turn(np.asarray(a, np.float64).reshape(3, *res), np.asarray(b, np.float64).reshape(3, *res))
     above = np.asarray(above).reshape(res)
     return values, (np.concatenate([above, above], -1) if turn else above), turn
 
 
-def tabulate_merl(brdf, resolution=MERL_RESOLUTION, dtype=jnp.float64) -> tuple[Float[Array, "3 n"], np.ndarray]:
+def tabulate_merl(brdf, resolution=MERL_RESOLUTION, dtype=jnp.float64, *, swap: bool = False
+                  ) -> tuple[Float[Array, "3 n"], np.ndarray]:
     """``(values (3, N), valid (N,))``: ``brdf`` (any model :func:`polyjax.render.rgb_brdf` accepts) at the bin
-    centres of the MERL grid in file order, and where both directions are above the horizon.
+    centres of the MERL grid in file order, and where both directions are above the horizon; ``swap``: ``f(v, u)``
+    instead of ``f(u, v)`` (the same compiled evaluation, the directions exchanged).
 
     Differentiable w.r.t. the model's parameters (a jitted, chunked evaluation); ``valid`` is numpy.
     """
     brdf = rgb_brdf(brdf)
     u, v, _, above = merl_grid(tuple(int(r) for r in resolution))
+    u, v = (v, u) if swap else (u, v)
     vals = _evaluate(brdf, jnp.asarray(u, dtype), jnp.asarray(v, dtype))
     return jnp.where(jnp.asarray(above)[:, None], vals, 0.0).T, np.asarray(above)
 
