@@ -305,3 +305,16 @@ def test_mat_file_that_crashes_scipy_is_a_data_format_error(tmp_path, damage):
     path.write_bytes(bytes(raw))
     with pytest.raises(pj.DataFormatError, match=r"Normal_gt\.mat.*(MAT data type|array flags)"):
         pj.data.read_mat_array(str(path), "Normal_gt")
+
+
+@pytest.mark.parametrize("reader", ["load_model", "load_nbrdf"])
+def test_a_zip_member_without_a_name_is_a_named_error(tmp_path, reader):
+    """A damaged central directory can give a member an empty name (found by fuzzing a saved model): zipfile's own
+    ``is_dir`` then fails with an IndexError; the readers name the file and the member instead."""
+    path = tmp_path / ("m.npz" if reader == "load_model" else "nets.zip")
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr(zipfile.ZipInfo(""), b"abc")
+    load = pj.load_model if reader == "load_model" else pj.data.load_nbrdf
+    with pytest.raises(pj.DataFormatError, match=r"member 0 without a name") as e:
+        load(path)
+    assert path.name in str(e.value)

@@ -107,6 +107,18 @@ def open_zip(path, what: str) -> zipfile.ZipFile:
         raise DataFormatError(path, what, f"a file that is not a readable zip archive ({e})") from None
 
 
+def zip_members(zf: zipfile.ZipFile, path, what: str) -> list[zipfile.ZipInfo]:
+    """The archive's members (``zf.infolist()``), each with a name: a damaged central directory can give a member
+    an empty name, on which ``zipfile``'s own ``ZipInfo.is_dir`` fails with an IndexError; a DataFormatError
+    naming the file instead."""
+    infos = zf.infolist()
+    for k, info in enumerate(infos):
+        if not info.filename:
+            raise DataFormatError(path, f"{what}: members with names", f"member {k} without a name (a damaged "
+                                  "central directory)")
+    return infos
+
+
 def _npy_header(fh, path, name: str, kinds: str) -> tuple[tuple[int, ...], bool, np.dtype]:
     """``(shape, fortran_order, dtype)`` from the ``.npy`` header at the start of ``fh``."""
     try:
@@ -160,7 +172,7 @@ def read_npz(path, what: str = "an .npz archive of arrays", kinds: str = NUMERIC
     out: dict[str, np.ndarray] = {}
     with open_zip(path, what) as zf:
         budget = limit
-        for info in zf.infolist():
+        for info in zip_members(zf, path, what):
             if info.is_dir():
                 continue
             if not info.filename.endswith(".npy"):

@@ -40,7 +40,7 @@ from .._arrays import device_array
 from .._config import data_file
 from .._errors import DataNotFoundError, InputError, PolyjaxError
 from .._measurements import Measurements
-from .._reading.bounded import open_zip, read_bytes, read_zip_member
+from .._reading.bounded import open_zip, read_bytes, read_zip_member, zip_members
 from .._reading.limits import LIMIT_ENV, network_limit
 from ._errors import HeaderError, NonFiniteValueError, UnknownMaterialError, WrongFormatError
 from ._merl import MERL_NAMES, MERL_RESOLUTION, TABLE3_MATERIALS, _choose_bins, merl_bin_angles, merl_grid
@@ -179,7 +179,12 @@ class _NetworkSet:
             except PolyjaxError as e:
                 raise WrongFormatError(self.path, "a zip archive (or folder) of Keras .h5 networks",
                                        getattr(e, "found", str(e))) from None
-            self.infos = {i.filename: i for i in self.zip.infolist()}
+            try:
+                self.infos = {i.filename: i for i in zip_members(self.zip, self.path, "a zip archive of Keras .h5 "
+                                                                                     "networks")}
+            except PolyjaxError:
+                self.zip.close()
+                raise
             found = [(PurePosixPath(i.filename).stem, i.filename) for i in self.infos.values()
                      if not i.is_dir() and i.filename.lower().endswith(".h5")]
         else:
