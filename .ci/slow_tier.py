@@ -1,7 +1,10 @@
-"""CI's slow tier: ``python -m pytest -q -m slow``, then, when every failure is a test worker that died (a crash
-inside XLA's compiler, seen in a few runs of this tier as a segmentation fault in ``backend_compile_and_load`` after
-a worker had run many tests; never reproduced alone), those tests once more, each file in a fresh process. Any
-other failure, or a crashed test that fails again, fails the run; a run whose report is missing fails too."""
+"""CI's slow tier: ``python -m pytest -q -m slow``, then, when every failure is a test worker that died, those tests
+once more, each file in a fresh process. Any other failure, or a crashed test that fails again, fails the run; a run
+whose report is missing fails too.
+
+The crashes seen in this tier (a segmentation fault in XLA's ``backend_compile_and_load`` after a worker had run many
+tests) were a worker reaching the kernel's limit on memory maps with its compiled programs; ``tests/conftest.py`` now
+empties JAX's caches well before it. The second chance stays for a worker lost otherwise."""
 
 import subprocess
 import sys

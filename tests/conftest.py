@@ -18,7 +18,9 @@ switch (``jax_enable_compilation_cache``) is off too, in this process and its su
 cache key for every compile with no cache to look in.
 
 After each test its cyclic garbage is collected and the surviving objects are frozen (:func:`gc.freeze`), so that
-Python's garbage collector stops scanning the long-lived objects JAX keeps (see ``pytest_runtest_teardown``).
+Python's garbage collector stops scanning the long-lived objects JAX keeps (see ``pytest_runtest_teardown``); a worker
+whose compiled programs hold a third of the kernel's limit on memory maps empties JAX's caches first (a worker at the
+limit crashed in XLA's compiler: ``_clear_when_maps_run_high``).
 
 In CI (``CI`` set) a missing data root is a failure, not a skip.
 """
@@ -144,9 +146,55 @@ def pytest_runtest_teardown(item, nextitem):
     plus ~9 s at the end of each worker (pytest collects five times at exit); with the freeze, about 1%. Frozen
     objects are never scanned; each test's own garbage is still collected here. What was frozen and later becomes
     unreachable in a reference cycle is not freed: a worker's peak memory was 6.1-7.0 GB in six full runs, 6.1 GB
-    in two without the freeze."""
+    in two without the freeze.
+
+    Every :data:`_MAPS_EVERY` tests the process's memory maps are counted (:func:`_clear_when_maps_run_high`)."""
     gc.collect()
+    _clear_when_maps_run_high()
     gc.freeze()
+
+
+#: how often (in tests) a worker counts its memory maps
+_MAPS_EVERY = 8
+#: the share of the kernel's limit on a process's memory maps (``vm.max_map_count``) at which JAX's caches are cleared
+_MAPS_SHARE = 1 / 3
+_tests_since_count = 0
+
+
+def _map_count() -> int | None:
+    """The memory maps this process holds (lines of ``/proc/self/maps``; None where there is no such file)."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:
+        return None
+
+
+def _max_map_count() -> int:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return 65530  # Linux's default
+
+
+def _clear_when_maps_run_high() -> None:
+    """Each compiled CPU program holds a few memory maps of its own (its code and constants: about 3 for a small
+    program) until it is dropped, and a worker keeps every program it compiled in JAX's caches. A slow-tier worker
+    reached Linux's limit (``vm.max_map_count``, 65,530 maps) after about 8 minutes and 20,000 compilations, and
+    the next compile died in XLA's ``backend_compile_and_load`` with a segmentation fault (counted while the tier
+    ran: 63,950 maps 20 s before the crash). So when this worker holds more than :data:`_MAPS_SHARE` of the limit,
+    JAX's caches are emptied (:func:`jax.clear_caches`) and the frozen objects unfrozen and collected, so that the
+    programs are freed; later tests compile what they need again."""
+    global _tests_since_count
+    _tests_since_count += 1
+    if _tests_since_count < _MAPS_EVERY:
+        return
+    _tests_since_count = 0
+    count = _map_count()
+    if count is not None and count > _MAPS_SHARE * _max_map_count():
+        jax.clear_caches()
+        gc.unfreeze()
+        gc.collect()
 
 
 #: CPU seconds (user + system, subprocesses included) of each test file alone in one process on 2 cores, measured in
