@@ -6,6 +6,7 @@ import logging
 import os
 import shutil
 import subprocess
+import warnings
 
 import equinox as eqx
 import jax
@@ -208,10 +209,25 @@ def test_merl_binary_round_trip(which, tmp_path):
     np.testing.assert_allclose(np.asarray(data.values), want, rtol=1e-9)
 
 
+def test_merl_binary_of_a_model_that_is_not_reciprocal_warns(tmp_path):
+    """MERL's grid holds one value per pair of directions: a model that is not reciprocal is written at each bin's
+    own order with a warning naming the file and how far apart the orders are; a reciprocal one warns nothing."""
+    res = (12, 12, 24)
+    with pytest.warns(ex.NotReciprocalWarning, match=r"skewed\.binary.*not reciprocal.*differ by up to \d+\.\d%"):
+        path = ex.merl_binary(_skewed, tmp_path / "skewed.binary", resolution=res)
+    values, _ = pj.data.read_merl_binary(path)
+    u, v, _, above = pj.data.merl_grid(res)
+    np.testing.assert_allclose(values[:, above], _rgb(_skewed, u[above], v[above]).T, rtol=1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ex.NotReciprocalWarning)
+        ex.merl_binary(cook_torrance(), tmp_path / "ct.binary", resolution=res)
+
+
 @pytest.mark.data
 def test_merl_binary_of_neural_material(tmp_path):
     brdf = neural()
-    path = ex.merl_binary(brdf, tmp_path / "neural.binary")
+    with pytest.warns(ex.NotReciprocalWarning, match="not reciprocal"):  # the network's two orders differ
+        path = ex.merl_binary(brdf, tmp_path / "neural.binary")
     data = pj.data.load_merl_binary(path)
     u, v, _, above = pj.data.merl_grid()
     np.testing.assert_allclose(np.asarray(data.values), _rgb(brdf, u[above], v[above]).T, rtol=1e-9)
@@ -508,3 +524,20 @@ def test_tabulate_merl_is_differentiable():
     d = jnp.zeros_like(model.coefficients).at[2, 1].set(1e-4)
     fd = (total(model.coefficients + d) - total(model.coefficients - d)) / 2e-4
     np.testing.assert_allclose(float(g[2, 1]), float(fd), rtol=1e-7)
+
+
+def test_export_to_merl_of_a_model_that_is_not_reciprocal_says_so_in_one_line(tmp_path, capsys):
+    """``polyjax export FIT --to merl`` of a model that is not reciprocal (a compact fit with skew rows): written,
+    and one warning line on stderr naming the file."""
+    from polyjax.cli import main
+
+    u, v = _directions(3000, seed=4)
+    values = jnp.moveaxis(jax.vmap(lambda a, b: _skewed(a, b))(u, v), -1, 0)
+    data = pj.Measurements(u=u, v=v, values=values, weights=jnp.ones(len(u)), mask=jnp.ones(len(u), bool))
+    fit = pj.internal.fit_compact_family(data, "skew", (10, 1))
+    src = tmp_path / "skew.npz"
+    pj.save_model(src, fit)
+    assert main(["export", str(src), "--to", "merl", "--out", str(tmp_path / "skew.binary")]) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "not reciprocal" in line]
+    assert len(lines) == 1 and lines[0].startswith("polyjax: warning: MERL export") and "skew.binary" in lines[0]

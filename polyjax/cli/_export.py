@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
 from pathlib import Path
 
 import polyjax as pj
@@ -12,7 +14,7 @@ from .._errors import InputError
 from .._files import write_bytes_atomically
 from ..export._expr import program
 from ..export._glsl import brdf_explorer, glsl
-from ..export._merl import merl_binary
+from ..export._merl import NotReciprocalWarning, merl_binary
 from ..export._mitsuba_name import check_plugin_name
 from ..export._rgl import is_rgl_source, rgl_to_merl
 from ..render._brdf import rgb_brdf
@@ -111,7 +113,14 @@ def run_export(args) -> int:
     elif args.to == "brdf-explorer":
         brdf_explorer(model, out)
     elif args.to == "merl":
-        merl_binary(model, out)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", NotReciprocalWarning)
+            merl_binary(model, out)
+        for w in caught:  # ours as one line on stderr, as the command's other messages; any other as it came
+            if issubclass(w.category, NotReciprocalWarning):
+                print(f"polyjax: warning: {w.message}", file=sys.stderr)
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     else:
         if isinstance(model, pj.PolynomialBRDF):
             program(model)  # fail now, not inside Mitsuba, on models that cannot be exported

@@ -11,7 +11,7 @@ from ._ggx import GGXLobes, capture_directions, fit_ggx_lobes, ggx_specular
 from ._glsl import brdf_explorer, glsl, numpy_function
 from ._gltf import gltf
 from ._materialx import materialx
-from ._merl import merl_binary, tabulate_merl
+from ._merl import NotReciprocalWarning, merl_binary, tabulate_merl
 from ._mitsuba import mitsuba_bsdf, register_mitsuba_bsdf
 from ._mitsuba_choice import choose_plugin as choose_mitsuba_plugin
 from ._mitsuba_xml import mitsuba_xml
@@ -19,8 +19,8 @@ from ._normal_map import decode_normals, encode_normals, normal_map
 from ._texture import png_bytes, srgb_encode, write_texture
 from ._usd import usd
 
-__all__ = ["CardMaps", "GGXLobes", "brdf_explorer", "capture_directions", "card_maps", "choose_mitsuba_plugin",
-           "decode_normals", "encode_normals", "fit_ggx_lobes", "ggx_specular", "glsl", "gltf", "gltf_card",
-           "materialx", "merl_binary", "mitsuba_bsdf", "mitsuba_xml", "normal_map", "numpy_function", "png_bytes",
-           "register_mitsuba_bsdf", "render_card", "srgb_encode", "tabulate_merl", "usd", "write_capture_textures",
-           "write_texture"]
+__all__ = ["CardMaps", "GGXLobes", "NotReciprocalWarning", "brdf_explorer", "capture_directions", "card_maps",
+           "choose_mitsuba_plugin", "decode_normals", "encode_normals", "fit_ggx_lobes", "ggx_specular", "glsl",
+           "gltf", "gltf_card", "materialx", "merl_binary", "mitsuba_bsdf", "mitsuba_xml", "normal_map",
+           "numpy_function", "png_bytes", "register_mitsuba_bsdf", "render_card", "srgb_encode", "tabulate_merl",
+           "usd", "write_capture_textures", "write_texture"]

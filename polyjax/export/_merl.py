@@ -5,12 +5,19 @@ The layout and the grid are those of :mod:`polyjax.data._merl` (header ``(90, 90
 BRDF at its bin centre (the direction :func:`polyjax.data.load_merl_binary` attaches to it), so writing and
 reading back returns the model's values there. Bins with either direction at or below the horizon are
 written as -1 (MERL's "missing"), and negative BRDF values (a polynomial fit can dip below 0) are clamped to 0
-(a negative number would read as missing).
+(a negative number would read as missing). MERL's grid holds one value per pair of directions (``phi_d`` in
+``[0, pi)``; a reader gives the other order the same value by reciprocity): each bin holds ``f`` at its own pair,
+and a model that is not reciprocal is written so with a :class:`NotReciprocalWarning` saying by how much its two
+orders differ (the viewer, the GLSL table and the Mitsuba plugin keep both orders). Its own order, not the mean of
+the two: MERL's table is defined at the bins' own order, and that is where a neural BRDF of a MERL material
+reproduces it (:func:`polyjax.data.load_merl_nbrdf` evaluates it there; the two orders of one such network, the
+tests', differ by up to 15 % of its largest value).
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -85,6 +92,28 @@ def tabulate_merl(brdf, resolution=MERL_RESOLUTION, dtype=jnp.float64, *, swap: 
     return jnp.where(jnp.asarray(above)[:, None], vals, 0.0).T, np.asarray(above)
 
 
+class NotReciprocalWarning(UserWarning):
+    """A model that is not reciprocal written to a format that holds one value per pair of directions (MERL's
+    ``.binary``): the file holds ``f`` at each bin's own order of the pair only."""
+
+
+def warn_not_reciprocal(brdf, resolution, what: str) -> None:
+    """A :class:`NotReciprocalWarning` naming ``what`` when ``brdf``'s two orders differ at the bins of
+    ``resolution`` (:func:`tabulate_both_orders`), with their largest difference relative to the largest value."""
+    values, _, turn = tabulate_both_orders(brdf, resolution)
+    if not turn:
+        return
+    n_p = values.shape[-1] // 2
+    a, b = values[..., :n_p], values[..., n_p:]
+    with np.errstate(invalid="ignore"):
+        scale = float(np.nanmax(np.abs(a), initial=0.0))
+        gap = float(np.nanmax(np.abs(a - b), initial=0.0))
+    warnings.warn(f"{what}: the model is not reciprocal (f(u, v) and f(v, u) differ by up to "
+                  f"{gap / max(scale, 1e-300):.1%} of its largest value); MERL's format holds one value per pair of "
+                  "directions: written f at each bin's own order (the viewer, GLSL and Mitsuba exports keep both "
+                  "orders)", NotReciprocalWarning, stacklevel=3)
+
+
 def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) -> Path:
     """Write ``brdf`` as a MERL ``.binary`` file (ALTA's ``brdf2data``), readable by BRDF Explorer, MERL-reading
     renderers and :func:`polyjax.data.load_merl_binary`.
@@ -97,12 +126,16 @@ def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) ->
 
     Returns:
         The path written. Not differentiable (file output); :func:`tabulate_merl` is.
+
+    Warns:
+        NotReciprocalWarning: a model that is not reciprocal, written at each bin's own order (module docstring).
     """
     path = check_output_path(path, "path")
+    warn_not_reciprocal(brdf, resolution, f"MERL export {str(path)!r}")
     vals, above = tabulate_merl(brdf, resolution)
     vals = np.asarray(vals, np.float64)  # max(f, 0) already: tabulate_merl evaluates through evaluate_rgb
     mask = np.broadcast_to(above, vals.shape) & np.isfinite(vals)
     return write_merl_binary(path, vals, resolution=resolution, mask=mask)
 
 
-__all__ = ["merl_binary", "tabulate_merl"]
+__all__ = ["NotReciprocalWarning", "merl_binary", "tabulate_merl"]
