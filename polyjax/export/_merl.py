@@ -97,12 +97,13 @@ class NotReciprocalWarning(UserWarning):
     ``.binary``): the file holds ``f`` at each bin's own order of the pair only."""
 
 
-def warn_not_reciprocal(brdf, resolution, what: str) -> None:
-    """A :class:`NotReciprocalWarning` naming ``what`` when ``brdf``'s two orders differ at the bins of
-    ``resolution`` (:func:`tabulate_both_orders`), with their largest difference relative to the largest value."""
-    values, _, turn = tabulate_both_orders(brdf, resolution)
+def one_order(values, above, turn: bool, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """From :func:`tabulate_both_orders`' ``(values, above, turn)``: the table of each bin's own order, ``(3, N_h,
+    N_d, N_p)`` and ``(N_h, N_d, N_p)``; for a model that is not reciprocal (``turn``) with a
+    :class:`NotReciprocalWarning` naming ``what`` and the largest difference of the orders relative to the largest
+    value."""
     if not turn:
-        return
+        return values, above
     n_p = values.shape[-1] // 2
     a, b = values[..., :n_p], values[..., n_p:]
     with np.errstate(invalid="ignore"):
@@ -112,6 +113,7 @@ def warn_not_reciprocal(brdf, resolution, what: str) -> None:
                   f"{gap / max(scale, 1e-300):.1%} of its largest value); MERL's format holds one value per pair of "
                   "directions: written f at each bin's own order (the viewer, GLSL and Mitsuba exports keep both "
                   "orders)", NotReciprocalWarning, stacklevel=3)
+    return a, above[..., :n_p]
 
 
 def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) -> Path:
@@ -131,9 +133,8 @@ def merl_binary(brdf, path: str | os.PathLike, *, resolution=MERL_RESOLUTION) ->
         NotReciprocalWarning: a model that is not reciprocal, written at each bin's own order (module docstring).
     """
     path = check_output_path(path, "path")
-    warn_not_reciprocal(brdf, resolution, f"MERL export {str(path)!r}")
-    vals, above = tabulate_merl(brdf, resolution)
-    vals = np.asarray(vals, np.float64)  # max(f, 0) already: tabulate_merl evaluates through evaluate_rgb
+    vals, above = one_order(*tabulate_both_orders(brdf, resolution), f"MERL export {str(path)!r}")
+    vals, above = vals.reshape(3, -1), above.reshape(-1)  # max(f, 0) already: tabulated through evaluate_rgb
     mask = np.broadcast_to(above, vals.shape) & np.isfinite(vals)
     return write_merl_binary(path, vals, resolution=resolution, mask=mask)
 
