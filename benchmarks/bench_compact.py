@@ -56,6 +56,8 @@ from polyjax.internal import CompactSparseFamily as SparseShapeFamily  # noqa: E
 
 sys.path.insert(0, str(Path(__file__).parent))
 import learn_compact_basis as lcb  # noqa: E402
+from _rgl_split import FILES as RGL_FILES  # noqa: E402
+from _rgl_split import rgl_split  # noqa: E402
 
 BUDGETS = (9, 16, 33, 64, 128, 256)
 FAMILY_SETS = {"compact": ("basis", "skew", "polynomial", "shared", "sparse"), "basis": ("basis",), "skew": ("skew",),
@@ -180,16 +182,9 @@ def rgl_rows():
     """Compact at 33 (shipped basis and polynomial, :func:`polyjax.fit_compact`, the default metric ``"log"`` and
     ``metric="l2"``, the paper's) and the neural BRDF (675) against the two RGL-EPFL measurements on held-out
     directions."""
-    root = pj.data_root()
-    zip_path = root / "nbrdf_sztrajman2021" / "rgl_two_nbrdf.zip"
     out = {}
-    for name in ("paper_white_rgb", "satin_rosaline_rgb"):
-        path = root / "rgl_epfl" / f"{name}.bsdf"
-        fit = pj.data.load_rgl(path, subsample=20000, seed=11)
-        score = pj.data.load_rgl(path, subsample=20000, seed=12)
-        net = pj.data.load_nbrdf(zip_path, name)
-        nb = net(score.u, score.v)
-        nb = jnp.moveaxis(nb, -1, 0) if nb.shape[-1] == 3 else nb
+    for name in RGL_FILES:
+        fit, score, nb = rgl_split(name)
         out[name] = dict(neural=tuple(float(x) for x in errors(score.values, nb, score)))
         for metric in ("log", "l2"):
             t0 = time.perf_counter()

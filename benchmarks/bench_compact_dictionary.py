@@ -9,7 +9,9 @@ columns its mask leaves within 33 numbers per material, chosen per file by its o
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_dictionary.py``
 """
 
+import sys
 import time
+from pathlib import Path
 
 import jax
 
@@ -17,30 +19,25 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 
-import polyjax as pj  # noqa: E402
 from polyjax._compact.families import sparse  # noqa: E402
 from polyjax._compact.select import rgb_errors  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _rgl_split import FILES, rgl_split  # noqa: E402
 
 #: (basis rows, skew rows, degree, hats in a, hats in b)
 VARIANTS = [(40, 16, 3, 10, 10), (40, 16, 5, 10, 10), (40, 16, 3, 20, 20), (40, 16, 5, 20, 20), (86, 20, 5, 20, 20),
             (32, 8, 5, 20, 20), (48, 16, 4, 16, 16), (40, 16, 3, 20, 0), (36, 12, 3, 20, 8), (40, 16, 3, 20, 10),
             (40, 16, 3, 30, 10), (32, 16, 3, 20, 4)]
-FILES = ("paper_white_rgb", "satin_rosaline_rgb")
 NAMES = ("D_BASIS", "D_SKEW", "POLY_DEGREE", "N_HATS_A", "N_HATS_B")
 
 
 def main():
     t0 = time.perf_counter()
-    root = pj.data_root()
     shipped = tuple(getattr(sparse, n) for n in NAMES)
     data, neural = {}, {}
     for name in FILES:
-        path = root / "rgl_epfl" / f"{name}.bsdf"
-        fit = pj.data.load_rgl(path, subsample=20000, seed=11)
-        score = pj.data.load_rgl(path, subsample=20000, seed=12)
-        net = pj.data.load_nbrdf(root / "nbrdf_sztrajman2021" / "rgl_two_nbrdf.zip", name)
-        nb = net(score.u, score.v)
-        nb = jnp.moveaxis(nb, -1, 0) if nb.shape[-1] == 3 else nb
+        fit, score, nb = rgl_split(name)
         data[name] = fit, score
         neural[name] = [float(x) for x in rgb_errors(score.values, nb, score.u, score.v, score.weights,
                                                      jnp.broadcast_to(score.mask, score.values.shape))]

@@ -13,7 +13,10 @@ then bounded by ``G_MAX`` alone): whether the bound couples the grazing bins to 
 Usage: ``POLYJAX_DATA=<data root> python benchmarks/bench_compact_objective.py``
 """
 
+import functools
+import sys
 import time
+from pathlib import Path
 
 import jax
 
@@ -21,24 +24,23 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 
-import polyjax as pj  # noqa: E402
 from polyjax._compact.families import sparse  # noqa: E402
-from polyjax._compact.families.shared import _mean_channel, shared_value  # noqa: E402
+from polyjax._compact.families.shared import shared_value  # noqa: E402
 from polyjax._compact.select import rgb_errors  # noqa: E402
 
-FILES = ("paper_white_rgb", "satin_rosaline_rgb")
+sys.path.insert(0, str(Path(__file__).parent))
+from _rgl_split import FILES, rgl_split  # noqa: E402
+
 SELECTION = (3.0, 30.0, None)
 FIT = (3.0, 10.0, 30.0, 100.0, None)
 
 
+@functools.partial(jax.jit, static_argnums=(1, 2, 3))
 def fit_one(cols, k, mix_select, mix_fit, u, v, values, weights, mask):
-    """``sparse._fit_one`` with the selection's and the fit's ``MIX`` apart (None: the L2 alone)."""
-    mean, every = _mean_channel(values, mask)
-    s_log, s_2, y = sparse._rows(u, v, mean[0], weights, every[0])
-    f_log, f_2 = sparse._factors(jnp.sum((s_log * y) ** 2), jnp.sum((s_2 * y) ** 2), mix_select)
-    chosen = sparse.select(*sparse._normal(cols, jnp.sqrt(f_log * s_log ** 2 + f_2 * s_2 ** 2), y)[:2], k)
-    return jnp.concatenate([sparse.pack(chosen).astype(cols.dtype),
-                            sparse._fit_chosen(cols, chosen, k, u, v, values, weights, mask, mix_fit)])
+    """The sparse family's fit of one material with the selection's and the fit's ``MIX`` apart (None: the L2
+    alone)."""
+    chosen = sparse.choose_columns(cols, k, mix_select, u, v, values, weights, mask)
+    return sparse.fit_with(cols, chosen, k, mix_fit, u, v, values, weights, mask)
 
 
 def scores(values, pred, d):
@@ -52,7 +54,6 @@ def label(mix):
 
 def main():
     t0 = time.perf_counter()
-    root = pj.data_root()
     fam = sparse.SparseShapeFamily()
     config = fam.candidates(33)[0]
     _, arrays = fam.program(config)
@@ -60,20 +61,14 @@ def main():
              "on held-out directions.", "",
              "| file | selection MIX | fit MIX | L2 | log | L2, log without the bound |", "|---|---|---|---|---|---|"]
     for name in FILES:
-        path = root / "rgl_epfl" / f"{name}.bsdf"
-        fit = pj.data.load_rgl(path, subsample=20000, seed=11)
-        score = pj.data.load_rgl(path, subsample=20000, seed=12)
-        net = pj.data.load_nbrdf(root / "nbrdf_sztrajman2021" / "rgl_two_nbrdf.zip", name)
-        nb = net(score.u, score.v)
-        nb = jnp.moveaxis(nb, -1, 0) if nb.shape[-1] == 3 else nb
+        fit, score, nb = rgl_split(name)
         ref = scores(score.values, nb, score)
         cols = sparse.dictionary(arrays[0], fit.u, fit.v)
         cols_score = sparse.dictionary(arrays[0], score.u, score.v)
         mask = jnp.broadcast_to(jnp.asarray(fit.mask), fit.values.shape)
-        one = jax.jit(fit_one, static_argnums=(1, 2, 3))
         for ms in SELECTION:
             for mf in FIT:
-                params = one(cols, config[0], ms, mf, fit.u, fit.v, jnp.asarray(fit.values),
+                params = fit_one(cols, config[0], ms, mf, fit.u, fit.v, jnp.asarray(fit.values),
                              jnp.asarray(fit.weights), mask)
                 l2, lg = scores(score.values, fam.evaluate(config, params, score.u, score.v), score)
                 coef, colour = sparse.dense(params, config[0], cols_score.shape[-1])

@@ -201,14 +201,26 @@ def _fit_chosen(cols, chosen, k, u, v, values, weights, mask, mix):
     return shared_fit(cols[:, idx], u, v, values, weights, mask, mix)
 
 
-def _fit_one(cols, k, mix, u, v, values, weights, mask):
-    """One material's parameters ``(W + k + 6,)`` from ``values (3, n)``, ``mask (3, n)``."""
+def choose_columns(cols, k, mix, u, v, values, weights, mask):
+    """One material's mask of ``k`` columns ``(D,)`` from ``values (3, n)``, ``mask (3, n)``: the selection's
+    problem (module docstring) with the L2 rows weighted by ``mix``."""
     mean, every = _mean_channel(values, mask)
     s_log, s_2, y = _rows(u, v, mean[0], weights, every[0])
     f_log, f_2 = _factors(jnp.sum((s_log * y) ** 2), jnp.sum((s_2 * y) ** 2), mix)
-    chosen = select(*_normal(cols, jnp.sqrt(f_log * s_log ** 2 + f_2 * s_2 ** 2), y)[:2], k)
+    return select(*_normal(cols, jnp.sqrt(f_log * s_log ** 2 + f_2 * s_2 ** 2), y)[:2], k)
+
+
+def fit_with(cols, chosen, k, mix, u, v, values, weights, mask):
+    """One material's parameters ``(W + k + 6,)``: the mask ``chosen (D,)`` packed, then its columns fitted with
+    the L2 weighted by ``mix``."""
     return jnp.concatenate([pack(chosen).astype(cols.dtype),
                             _fit_chosen(cols, chosen, k, u, v, values, weights, mask, mix)])
+
+
+def _fit_one(cols, k, mix, u, v, values, weights, mask):
+    """One material's parameters ``(W + k + 6,)`` from ``values (3, n)``, ``mask (3, n)``."""
+    chosen = choose_columns(cols, k, mix, u, v, values, weights, mask)
+    return fit_with(cols, chosen, k, mix, u, v, values, weights, mask)
 
 
 def _folds_one(cols, k, mix, u, v, held, parts, values, weights, mask):
