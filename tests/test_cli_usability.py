@@ -162,3 +162,41 @@ def test_fit_report_warns_on_cornell_cayman(capsys, data_root):
     ratio = np.asarray(js["l2"]) / np.asarray(js["l2_zero_model"])
     assert np.all(ratio > 0.99) and np.all(ratio < 1.0)
     assert len(js["warnings"]) == 1 and "cayman R" in js["warnings"][0]
+
+
+def _fitted_samples(capsys, args) -> tuple[int, str]:
+    """``polyjax fit ... --json``'s sample count (from the data set's source) and source."""
+    assert main(["fit", *args, "--variables", "ward", "--degree", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    return out["n_samples"], out["source"]
+
+
+def test_fit_subsamples_data_on_the_merl_grid_by_default_and_as_told(capsys, tmp_path):
+    """``polyjax fit`` keeps 20,000 bins of a data set on the MERL grid unless ``--subsample`` says otherwise,
+    as ``polyjax export`` does; ``all`` keeps every bin."""
+    path = tmp_path / "big.binary"
+    write_small_merl(path, resolution=(30, 30, 60))  # 54,000 bins, about half above the horizon
+    every = pj.data.load(f"merl:{path}").values.shape[-1]
+    assert every > 20000
+    assert _fitted_samples(capsys, ["--dataset", f"merl:{path}"])[0] == 20000
+    n, source = _fitted_samples(capsys, ["--dataset", f"merl:{path}", "--subsample", "500"])
+    assert n == 500 and "subsample 500" in source
+    n, source = _fitted_samples(capsys, ["--dataset", f"merl:{path}", "--subsample", "all"])
+    assert n == every and "subsample" not in source
+
+
+@pytest.mark.parametrize("value", ["5", "many", "0.5", "-300"])
+def test_fit_subsample_bad_values_are_named_before_any_work(capsys, two_merl, value):
+    a, _ = two_merl
+    assert main(["fit", "--dataset", f"merl:{a}", "--subsample", value]) == 2
+    err = capsys.readouterr().err
+    assert "--subsample" in err and "expected an integer >= 100 or 'all'" in err and repr(value) in err
+
+
+def test_fit_subsample_of_a_data_set_off_the_merl_grid_is_an_error(capsys, tmp_path):
+    ang = np.array([[0.1, 0.0, 0.2, 3.0], [0.3, 0.5, 0.4, 2.0]])
+    astm = write_astm(tmp_path / "s.astm", ang, np.ones((2, 3)), ["R", "G", "B"])
+    assert main(["fit", "--dataset", f"cornell:{astm}", "--subsample", "500"]) == 2
+    assert "--subsample: applies to data sets on the MERL grid" in capsys.readouterr().err
+    assert main(["fit", "--sample", "25", "--subsample", "500"]) == 2
+    assert "not to --sample" in capsys.readouterr().err

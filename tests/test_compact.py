@@ -179,7 +179,7 @@ def test_exports_and_view_tabulate_the_compact_model(tmp_path, fitted, capsys):
     assert item.info["numbers per material"] == one.n_numbers
 
 
-@pytest.mark.slow  # the cross-validation of every candidate on the full MERL grid
+@pytest.mark.slow  # the cross-validation of every candidate (on the default 20,000 bins)
 def test_cli_default_on_rgb_data_is_the_compact_model_and_options_give_the_paper(capsys, data_root, tmp_path):
     assert main(["fit", "--dataset", "merl-nbrdf:chrome", "--json", "--save", str(tmp_path / "c.npz")]) == 0
     out = json.loads(capsys.readouterr().out)

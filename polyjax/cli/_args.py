@@ -111,13 +111,70 @@ def spec_from_args(args, *, several: bool = False, flag: str = "--degree") -> Po
         raise type(e)(f"--{e}") from None
 
 
+#: the samples of a data set on the MERL grid that ``polyjax fit`` and a standard export use unless ``--subsample``
+#: says otherwise (``benchmarks/RESULTS.md``: "the default subsample")
+DEFAULT_SUBSAMPLE = 20000
+#: the data set kinds on the MERL grid (1,111,432 bins), subsampled by default
+SUBSAMPLED_KINDS = ("merl", "merl-nbrdf", "merl_nbrdf", "nbrdf", "rgl")
+
+
+def add_subsample_option(p: argparse.ArgumentParser, cost: str) -> None:
+    """``--subsample`` on the parser ``p``; ``cost``: what every bin costs the command, for the help."""
+    p.add_argument("--subsample", default=None,
+                   help=f"keep this many samples of a measured data set, or 'all' (default {DEFAULT_SUBSAMPLE} of a "
+                   f"data set on the MERL grid: merl:, merl-nbrdf:, nbrdf:, rgl:, whose 1.1 M bins take {cost}, "
+                   "for a model within a few per cent of the same error; other data sets: all)")
+
+
+def check_subsample(text) -> int | None:
+    """``--subsample`` parsed before any work: None (not given, or ``all``) or a count of at least 100.
+
+    Raises:
+        InputError: anything else, naming the option and what it expects.
+    """
+    if text is None or str(text).strip().lower() == "all":
+        return None
+    try:
+        n = int(str(text))
+    except ValueError:
+        n = 0
+    if n < 100:
+        raise InputError(f"--subsample: expected an integer >= 100 or 'all', found {text!r}")
+    return n
+
+
+def subsample_option(text, spec: str) -> dict:
+    """The loader's ``subsample`` option of ``--subsample`` (``text``: None, an integer, or ``all``) for the data
+    set ``spec``: :data:`DEFAULT_SUBSAMPLE` for a data set on the MERL grid when not given, nothing for ``all`` or
+    for another data set when not given.
+
+    Raises:
+        InputError: a bad value, or a count for a data set that is not on the MERL grid (its loader has no
+            subsample).
+    """
+    n = check_subsample(text)
+    kind = pj.data.dataset_spec(spec).partition(":")[0].strip().lower() if spec else ""
+    grid = kind in SUBSAMPLED_KINDS
+    if text is None:
+        return {"subsample": DEFAULT_SUBSAMPLE} if grid else {}
+    if n is not None and not grid:
+        raise InputError(f"--subsample: applies to data sets on the MERL grid ({', '.join(SUBSAMPLED_KINDS)}), "
+                         f"found {spec!r}")
+    return {} if n is None else {"subsample": n}
+
+
 def load_dataset(args):
     """Measurements from --dataset / --sample, or the synthetic default when no data root is configured at all.
 
-    A data root that is given (``--data-root`` or ``$POLYJAX_DATA``) but does not exist is an error.
+    A data set on the MERL grid is subsampled as ``--subsample`` says (:func:`subsample_option`). A data root that
+    is given (``--data-root`` or ``$POLYJAX_DATA``) but does not exist is an error.
     """
+    text = getattr(args, "subsample", None)
     if args.dataset:
-        return pj.data.load(args.dataset, root=args.data_root), False
+        return pj.data.load(args.dataset, root=args.data_root, **subsample_option(text, args.dataset)), False
+    if check_subsample(text) is not None:
+        raise InputError(f"--subsample: applies to --dataset on the MERL grid, not to --sample (CUReT), found "
+                         f"{text!r}")
     if configured_data_root(args.data_root) is not None:
         return pj.data.load_curet(args.data_root, [args.sample]), False
     return pj.data.synthetic_default(), True

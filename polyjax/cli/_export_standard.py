@@ -7,7 +7,8 @@ kind, :func:`polyjax._io.fitter_for`): R, G, B jointly, paper equation (11) with
 model is tabulated first at ``--samples`` random direction pairs (uniform in solid angle, equal weights, a quarter
 of the views near the mirror direction so that glossy lobes are sampled), a data set (``merl-nbrdf:<name>``,
 ``merl:<file>``, ``rgl:<file>``, ``cornell:<name>``, ...) is used as loaded; a data set on the MERL grid
-(:data:`SUBSAMPLED_KINDS`) on a seeded subsample of :data:`DEFAULT_SUBSAMPLE` of its bins unless ``--subsample``
+(:data:`polyjax.cli._args.SUBSAMPLED_KINDS`) on a seeded subsample of
+:data:`polyjax.cli._args.DEFAULT_SUBSAMPLE` of its bins unless ``--subsample``
 says otherwise (``all``: every bin, 1.1 M of them, minutes and gigabytes). The default loses little: on the full grid
 the material fitted to 20,000 bins has an L2 and a log-space error within a few per cent of the one fitted to every
 bin (``benchmarks/RESULTS.md``, "Standard exports of measured data: the default subsample").
@@ -30,10 +31,10 @@ import numpy as np
 import polyjax as pj
 
 from .. import export
-from .._errors import InputError
 from .._files import check_output_path
 from .._io import fitter_for
 from ..export._mitsuba_choice import PLUGINS, TOLERANCE, fit_plugin
+from ._args import add_subsample_option, check_subsample, subsample_option
 from ._capture_out import capture_fit_of, run_card_export
 from ._progress import progress_line
 
@@ -46,21 +47,11 @@ TARGETS: dict[str, tuple[str, str, str]] = {
 }
 
 
-#: the samples of a data set on the MERL grid that a standard export fits unless ``--subsample`` says otherwise
-DEFAULT_SUBSAMPLE = 20000
-#: the data set kinds on the MERL grid (1,111,432 bins), subsampled by default
-SUBSAMPLED_KINDS = ("merl", "merl-nbrdf", "merl_nbrdf", "nbrdf", "rgl")
-
-
 def add_standard_arguments(p) -> None:
     """The options of the standard targets, added to ``polyjax export``'s parser."""
     p.add_argument("--samples", type=int, default=20000,
                    help="direction pairs a saved model is tabulated at (--to gltf, mitsuba-xml, openpbr, usd)")
-    p.add_argument("--subsample", default=None,
-                   help="keep this many samples of a measured data set, or 'all' (--to gltf, mitsuba-xml, openpbr, "
-                   f"usd; default {DEFAULT_SUBSAMPLE} of a data set on the MERL grid: merl:, merl-nbrdf:, nbrdf:, "
-                   "rgl:, whose 1.1 M bins take minutes and gigabytes to fit, for a material within a few per cent "
-                   "of the same error)")
+    add_subsample_option(p, "minutes and gigabytes to fit (--to gltf, mitsuba-xml, openpbr, usd)")
     p.add_argument("--plugin", default="auto", choices=("auto",) + PLUGINS,
                    help="the Mitsuba plugin written (--to mitsuba-xml); auto: the simplest of "
                    f"{', '.join(PLUGINS)} whose L2 is within --tolerance of principled's")
@@ -97,25 +88,8 @@ def _source(args):
         data = pj.make_measurements(u, v, values, source=src)
     else:
         src = pj.data.dataset_spec(src)
-        data = pj.data.load(src, root=getattr(args, "data_root", None), **_subsample_option(args.subsample, src))
+        data = pj.data.load(src, root=getattr(args, "data_root", None), **subsample_option(args.subsample, src))
     return _one_material(data, args.index, src)
-
-
-def _subsample_option(text, spec: str) -> dict:
-    """The loader's ``subsample`` option of ``--subsample`` (``text``: None, an integer, or ``all``) for the data
-    set ``spec``: :data:`DEFAULT_SUBSAMPLE` for a data set on the MERL grid when not given, nothing for ``all``."""
-    grid = spec.partition(":")[0].strip().lower() in SUBSAMPLED_KINDS
-    if text is None:
-        return {"subsample": DEFAULT_SUBSAMPLE} if grid else {}
-    if str(text).strip().lower() == "all":
-        return {}
-    try:
-        n = int(str(text))
-    except ValueError:
-        n = 0
-    if n < 100:
-        raise InputError(f"--subsample: expected an integer >= 100 or 'all', found {text!r}")
-    return {"subsample": n}
 
 
 def _one_material(data, index, src):
@@ -155,7 +129,7 @@ def run_standard_export(args) -> int:
     if capture_fit is not None:  # a capture fit: the .glb card of its maps
         return run_card_export(args, capture_fit, out)
     kind, model_name = fitter_for(name)
-    _subsample_option(args.subsample, "")  # checked before any work
+    check_subsample(args.subsample)  # checked before any work
     with progress_line(f"loading {args.model}"):
         data = _source(args)
     what = ", ".join(PLUGINS) if args.to == "mitsuba-xml" and args.plugin == "auto" else model_name

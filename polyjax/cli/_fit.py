@@ -14,7 +14,15 @@ from .._config import check_model_file
 from .._fit.saved import fit_saved
 from .._io import fitter_for, kind_of
 from .._results import status_warnings
-from ._args import add_model_options, check_degrees_fit, load_dataset, spec_from_args, strict_json
+from ._args import (
+    add_model_options,
+    add_subsample_option,
+    check_degrees_fit,
+    check_subsample,
+    load_dataset,
+    spec_from_args,
+    strict_json,
+)
 from ._fit_compact import MODEL_OPTIONS, add_compact_options, run_compact, wants_compact
 from ._progress import compile_notice, progress_line
 
@@ -38,6 +46,7 @@ def add_parser(sub, common) -> None:
     add_model_options(f, DEFAULT_SPEC, several=True)
     f.set_defaults(**{k: None for k in MODEL_OPTIONS})  # None: not given (the defaults follow the data, cmd_fit)
     add_compact_options(f)
+    add_subsample_option(f, "40 s and 5 GB to fit compactly against 6 s and 0.6 GB")
     f.add_argument("--cutoff", type=float, default=80.0, help="grazing cutoff in degrees (default 80)")
     f.add_argument("--save", default=None, help="write the fitted model (.npz or .json; format in README)")
     f.add_argument("--json", action="store_true", help="machine-readable output")
@@ -82,6 +91,7 @@ def cmd_fit(args) -> int:
     kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
     if args.save:
         check_model_file(args.save, "--save")
+    check_subsample(args.subsample)
     data, synthetic = load_dataset(args)
     if wants_compact(args, data, given):
         return run_compact(args, data)
@@ -155,6 +165,7 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
         warnings_ += status_warnings(np.asarray(model.status), labels)
     out = {
         "source": data.source,
+        "n_samples": int(data.values.shape[-1]),
         "synthetic": synthetic,
         "model": model_name,
         "names": list(data.names),
@@ -220,7 +231,7 @@ def _print_fit(args, out: dict, model, beta) -> None:
     """The text report of ``polyjax fit`` from its JSON record ``out``."""
     polynomial = out["model"] == "polynomial"
     n_params, status = out["n_params"], out["status"]
-    print(f"data: {out['source']}")
+    print(f"data: {out['source']}, {out['n_samples']} samples")
     if polynomial:
         counts = (f"p={args.degree} ({', '.join(map(str, n_params))} parameters)" if isinstance(n_params, list)
                   else f"p={args.degree}, {n_params} parameters")

@@ -64,14 +64,15 @@ def run_compact(args, data) -> int:
     names = list(data.names) if len(data.names) else [""]
     out = {"source": data.source, "model": "compact", "budget": budget, "metric": args.metric,
            "family": model.family, "config": repr(model.config), "n_numbers": model.n_numbers,
-           "names": names, "l2": np.asarray(model.l2).tolist(), "log": np.asarray(model.log).tolist(),
+           "n_samples": int(data.values.shape[-1]), "names": names, "l2": np.asarray(model.l2).tolist(),
+           "log": np.asarray(model.log).tolist(),
            "seconds": elapsed}
     if args.save:
         out["saved"] = str(pj.save_model(args.save, model, metadata={"fit_seconds": elapsed, "fit_command": "fit"}))
     if args.json:
         print(strict_json(out))
         return 0
-    print(f"data: {out['source']}")
+    print(f"data: {out['source']}, {out['n_samples']} samples")
     print(f"model: compact, family {model.family}, config {out['config']}, {model.n_numbers} numbers per material "
           f"(budget {budget}, chosen by {args.metric} held-out error)")
     for name, l2, lg in zip(names, np.ravel(out["l2"]), np.ravel(out["log"])):
