@@ -15,7 +15,10 @@ import png
 import pytest
 
 import polyjax as pj
+from polyjax.cli import main
 from polyjax.render import Camera, DirectionalLight, Lambertian, NormalMap, Scene, Sphere, render
+
+from _fuzz_problems import write_diligent as write_fuzz_diligent
 
 H, W = 12, 14  # a small frame: the sphere's disc inside it
 LIGHTS = np.array([[0.1, 0.2, 1.0], [-0.5, 0.3, 0.8], [0.6, -0.2, 0.75], [0.0, -0.6, 0.8], [0.4, 0.5, 0.7],
@@ -173,7 +176,6 @@ def test_clamped_fit_from_images_is_bounded_under_lights_outside_the_fitted_rang
 
 
 def test_fit_photos_clamps_by_default(synthetic, tmp_path):
-    from polyjax.cli import main
 
     folder, _ = synthetic
     for flags, clamp in (([], True), (["--no-clamp"], False)):
@@ -265,7 +267,6 @@ def test_fit_derivative_wrt_images_matches_finite_differences(synthetic, opts):
 
 
 def test_fit_photos_and_relight_command_line(synthetic, tmp_path, capsys):
-    from polyjax.cli import main
 
     folder, cap = synthetic
     model = tmp_path / "model.npz"
@@ -306,7 +307,6 @@ def test_diligent_ball_loads(data_root):
 
 def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path):
     """``polyjax fit-photos`` and ``pj.fit_polynomial_to_images`` with no options make the same model, clamped."""
-    from polyjax.cli import main
 
     folder, _ = synthetic
     path = tmp_path / "m.npz"
@@ -316,3 +316,26 @@ def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_p
     saved = pj.load_model(path)
     assert saved.spec == api.spec and api.clamp and api.link == "log" and api.variables == "rusinkiewicz"
     np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-9, atol=1e-12)
+
+
+def test_a_capture_folder_by_name_is_found_under_the_data_root(tmp_path, monkeypatch, capsys):
+    """``load_photometric("catPNG")`` and ``polyjax fit-photos catPNG`` look under the data root's ``diligent/`` and
+    ``diligent/crop8/`` when no such folder is in the working directory; a name found nowhere is a named error that
+    lists every place tried."""
+    root = tmp_path / "root"
+    write_fuzz_diligent(root / "diligent" / "crop8" / "toyPNG")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(pj.DATA_ENV, str(root))
+    cap = pj.data.load_photometric("toyPNG")
+    assert cap.n_lights == 3 and cap.images.shape == (3, 4, 5, 3)
+    assert pj.data.resolve_photometric_folder("toyPNG") == str(root / "diligent" / "crop8" / "toyPNG")
+    local = write_fuzz_diligent(tmp_path / "toyPNG", lights=2)  # a folder of that name here wins
+    assert pj.data.load_photometric("toyPNG").n_lights == 2
+    shutil.rmtree(local)
+    with pytest.raises(pj.DataNotFoundError, match="looked at dogPNG, .*diligent.dogPNG, .*crop8.dogPNG"):
+        pj.data.load_photometric("dogPNG")
+    assert main(["fit-photos", "toyPNG", "--variables", "lafortune", "--degree", "1",
+                 "--save", str(tmp_path / "t.npz")]) in (0, 1)
+    assert "scanned normals; --fit-normals fits the normals" in capsys.readouterr().out
+    assert main(["fit-photos", "dogPNG", "--save", str(tmp_path / "d.npz")]) == 2
+    assert "dogPNG: not a folder" in capsys.readouterr().err and not (tmp_path / "d.npz").exists()

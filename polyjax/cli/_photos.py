@@ -111,7 +111,8 @@ def run_fit_capture(args, capture, save) -> int:
     if args.json:
         print(json.dumps(out))
     else:
-        print(f"fit-photos: no normals in the folder: normals and BRDF fitted from {out['lights']} lights, "
+        why = "--fit-normals" if args.fit_normals else "no normals in the folder"
+        print(f"fit-photos: {why}: normals and BRDF fitted from {out['lights']} lights, "
               f"{out['pixels']} pixels, {out['lobes']} shared lobes, {out['iterations']} iterations ({seconds:.2f} s)")
         print(f"  status: {status}; CaptureFit written to {save}")
         print(f"  textures (normal map, material maps) in {out['textures']}: {', '.join(sorted(files))}")
@@ -122,7 +123,7 @@ def run_fit_photos(args) -> int:
     """Run ``polyjax fit-photos``; returns the exit status."""
     spec = spec_from_args(args)
     save = check_model_file(args.save, "--save")
-    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights)).cropped()
+    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights), root=args.data_root).cropped()
     if capture.normals is None or args.fit_normals:
         if capture.normals is not None:
             capture = capture.__class__(capture.images, capture.mask, None, capture.light_directions,
@@ -150,6 +151,8 @@ def run_fit_photos(args) -> int:
               f"{args.weighting} weighting, {args.robust_steps} robust steps, "
               f"{'clamped to the fitted box' if spec.clamp else 'not clamped'} ({seconds:.2f} s)")
         print(f"  status: {', '.join(status)}; model written to {save}")
+        print("  one BRDF for the whole object, with the folder's scanned normals; --fit-normals fits the normals "
+              "and a spatially varying BRDF from the photographs alone")
     return 0 if all(s == "OK" for s in status) else 1
 
 
@@ -184,7 +187,7 @@ def run_relight(args) -> int:
     """Run ``polyjax relight``; returns the exit status."""
     out_dir = check_output_dir(args.out, "--out")
     model = pj.load_model(args.model)
-    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights))
+    capture = pj.data.load_photometric(args.folder, parse_lights(args.lights), root=args.data_root)
     predicted = np.asarray(pj.relight(model, capture))
     rows, total = errors_of(predicted, capture)
     out_dir.mkdir(parents=True, exist_ok=True)

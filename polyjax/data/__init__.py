@@ -66,7 +66,8 @@ from ._synthetic import synthetic_default
 from ._tabulate import tabulate
 
 #: the photographs' loaders, imported on first use: a capture is rendered by polyjax.render (polyjax.inverse)
-_LAZY_NAMES = ("PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png")
+_LAZY_NAMES = ("PNG16_MAX", "check_png_header", "load_photometric", "resolve_photometric_folder", "read_mat_array",
+               "read_png")
 
 
 def __getattr__(name):
@@ -94,6 +95,7 @@ __all__ = [
     "directions_to_rusinkiewicz", "load_merl_binary", "merl_bin_angles", "merl_bin_weights", "merl_grid",
     "merl_index", "read_merl_binary", "rusinkiewicz_to_directions", "write_merl_binary", "NeuralBRDF",
     "load_merl_nbrdf", "load_nbrdf", "load_nbrdf_measurements", "merl_nbrdf_path", "nbrdf_names", "resolve_merl_name",
-    "tabulate", "PNG16_MAX", "check_png_header", "load_photometric", "read_mat_array", "read_png", "RGLBRDF",
+    "tabulate", "PNG16_MAX", "check_png_header", "load_photometric", "resolve_photometric_folder", "read_mat_array",
+    "read_png", "RGLBRDF",
     "load_rgl", "read_rgl", "resolve_rgl_path",
 ]

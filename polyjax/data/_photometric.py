@@ -36,6 +36,7 @@ import numpy as np
 import png
 import scipy.io
 
+from .._config import data_root, has_data_root
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._files import inside_folder
 from .._reading.bounded import checked_size, read_bytes, read_text
@@ -317,12 +318,38 @@ def _normals(folder: str, shape, mask) -> np.ndarray | None:
     return np.where(mask[..., None], n / np.where(length > 0, length, 1.0)[..., None], np.array([0.0, 0.0, 1.0]))
 
 
-def load_photometric(folder: str, lights: Sequence[int] | None = None):
+#: the folders below the data root where :func:`resolve_photometric_folder` looks for an object's folder by name
+PHOTOMETRIC_FOLDERS = ("diligent", "diligent/crop8")
+
+
+def resolve_photometric_folder(folder: str | os.PathLike, root: str | os.PathLike | None = None) -> str:
+    """The object's folder as given, else ``<data root>/diligent/<folder>`` or ``<data root>/diligent/crop8/<folder>``
+    (:data:`PHOTOMETRIC_FOLDERS`, e.g. ``"catPNG"``); :class:`polyjax.DataNotFoundError` naming every place tried
+    when none is a folder."""
+    folder = os.fspath(folder)
+    if os.path.isdir(folder):
+        return folder
+    tried = [folder]
+    if (root is not None or has_data_root()) and not os.path.isabs(folder):
+        base = os.fspath(data_root(root))
+        for sub in PHOTOMETRIC_FOLDERS:
+            candidate = os.path.join(base, sub, folder)
+            if os.path.isdir(candidate):
+                return candidate
+            tried.append(candidate)
+    raise DataNotFoundError(f"{folder}: not a folder (expected a DiLiGenT object folder, e.g. pmsData/ballPNG, or "
+                            f"an object's name under the data root's {' or '.join(PHOTOMETRIC_FOLDERS)}; looked at "
+                            f"{', '.join(tried)})")
+
+
+def load_photometric(folder: str, lights: Sequence[int] | None = None, *, root: str | os.PathLike | None = None):
     """Load a capture in DiLiGenT's layout (module notes) as a :class:`polyjax.Capture`.
 
     Args:
-        folder: the object's folder (e.g. ``.../pmsData/ballPNG``).
+        folder: the object's folder (e.g. ``.../pmsData/ballPNG``), or its name under the data root's
+            ``diligent/`` or ``diligent/crop8/`` (e.g. ``"catPNG"``; :func:`resolve_photometric_folder`).
         lights: 0-based indices of the lines of ``filenames.txt`` to load (None: every light).
+        root: data root (default ``$POLYJAX_DATA``), for a folder given by name.
 
     Returns:
         :class:`polyjax.Capture`: ``images (L, H, W, 3)`` in the camera's units (PNG value / 65535, or / 255 for
@@ -336,9 +363,7 @@ def load_photometric(folder: str, lights: Sequence[int] | None = None):
             malformed file (each naming the file).
         InputError: light indices out of range.
     """
-    folder = os.fspath(folder)
-    if not os.path.isdir(folder):
-        raise DataNotFoundError(f"{folder}: not a folder (expected a DiLiGenT object folder, e.g. pmsData/ballPNG)")
+    folder = resolve_photometric_folder(folder, root)
     names, dirs, ints = _lights(folder, lights)
     mask_path = os.path.join(folder, "mask.png")
     if not os.path.isfile(mask_path):
