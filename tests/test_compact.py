@@ -110,6 +110,9 @@ def test_input_errors_named_before_work(tiny):
     two = tiny
     with pytest.raises(pj.BudgetError, match="budget: 1 numbers"):
         pj.fit_compact(two, budget=1)
+    for budget in (3, 5):  # the mean row alone (3 numbers) is not offered: the error names the smallest budget
+        with pytest.raises(pj.BudgetError, match=f"budget: {budget} numbers .* expected a budget of at least 6"):
+            pj.fit_compact(two, budget=budget)
     with pytest.raises(pj.InputError, match="RGB values"):
         pj.fit_compact(pj.Measurements(u=two.u, v=two.v, values=two.values[:, 0], weights=two.weights,
                                        mask=two.mask), budget=9)

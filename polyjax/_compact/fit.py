@@ -126,10 +126,9 @@ def _choose(data, budget, metric, families, folds, objects) -> Choice:
     names = _check(data, budget, metric, families, folds)
     chains = candidate_chains(names, int(budget), objects)
     if not chains:
-        smallest = {n: min((family_named(n).n_numbers(c) for c in family_named(n).configs(10 ** 9)), default=None)
-                    for n in names}
-        raise BudgetError(f"budget: {budget} numbers per material admits no model of the families {list(names)} "
-                          f"(the smallest need {smallest})")
+        smallest = next((b for b in range(int(budget) + 1, 10 ** 4) if candidate_chains(names, b, objects)), None)
+        raise BudgetError(f"budget: {budget} numbers per material admits no model of the families {list(names)}: "
+                          f"expected a budget of at least {smallest}")
     u, v, values, weights, mask = _arrays(data)
     (family, config), params, (l2, lg), tried = choose(chains, metric, u, v, values, weights, mask, int(folds),
                                                       objects)
