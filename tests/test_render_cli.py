@@ -18,3 +18,12 @@ def test_render_command_writes_grid_and_psnr(tmp_path, capsys, monkeypatch):
     assert text.count("PSNR vs measured") == 3
     assert (tmp_path / "grid_0_compare.png").exists()
     assert np.isfinite(img).all() and img.max() > 0
+
+
+def test_render_out_with_a_suffix_names_every_file_from_the_same_prefix(tmp_path, capsys, monkeypatch):
+    """``--out grid.exr`` writes ``grid.exr``, ``grid.png`` and ``grid_0_compare.png`` (not ``grid.exr_0_...``)."""
+    monkeypatch.delenv("POLYJAX_DATA", raising=False)
+    assert main(["render", "--degrees", "1", "--reference", "--size", "8", "--out", str(tmp_path / "grid.exr")]) == 0
+    capsys.readouterr()
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["grid.exr", "grid.png", "grid_0_compare.png", "grid_1_compare.png", "grid_2_compare.png"]

@@ -169,10 +169,10 @@ def _lanes(model, n_mat: int, has_channels: bool, model_arg, spec: str):
 
 
 def _compare(out: Path, images, hit, row_names, names, n_mat: int, exposure: float) -> None:
-    """One comparison figure per material (``<out>_<k>_compare.png``), the measured row against the others, with
-    their PSNR printed."""
+    """One comparison figure per material (``<out>_<k>_compare.png``, ``<out>`` less its suffix, as for the EXR
+    and the PNG), the measured row against the others, with their PSNR printed."""
     for k in range(n_mat):
-        fig = out.parent / f"{out.name}_{k}_compare.png"
+        fig = out.parent / f"{out.with_suffix('').name}_{k}_compare.png"
         scores = comparison_figure(fig, images[0, k], list(images[1:, k]), row_names[1:], exposure=exposure, mask=hit)
         print(f"{names[k] if k < len(names) else k}: PSNR vs measured " +
               ", ".join(f"{n} {s:.2f} dB" for n, s in scores.items()) + f"  ({fig})")
