@@ -200,3 +200,19 @@ def test_fit_subsample_of_a_data_set_off_the_merl_grid_is_an_error(capsys, tmp_p
     assert "--subsample: applies to data sets on the MERL grid" in capsys.readouterr().err
     assert main(["fit", "--sample", "25", "--subsample", "500"]) == 2
     assert "not to --sample" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("to, good, bad", [("merl", "m.binary", "m.txt"), ("glsl", "m.frag", "m.brdf"),
+                                           ("brdf-explorer", "m.brdf", "m.glsl"), ("mitsuba", "m.py", "m.txt")])
+def test_export_out_must_end_in_the_target_s_suffix(capsys, tmp_path, two_merl, to, good, bad):
+    """``export --to merl --out m.txt`` wrote a MERL table named ``.txt``; a file of the wrong suffix is now refused
+    before the model is read, as the standard targets' writers and ``--save`` refuse theirs."""
+    a, _ = two_merl
+    saved = tmp_path / "fit.npz"
+    assert main(["fit", "--dataset", f"merl:{a}", "--variables", "ward", "--degree", "1", "--save", str(saved)]) == 0
+    capsys.readouterr()
+    assert main(["export", str(saved), "--to", to, "--out", str(tmp_path / bad)]) == 2
+    err = capsys.readouterr().err
+    assert "--out: expected a file name ending in" in err and bad in err and not (tmp_path / bad).exists()
+    assert main(["export", str(saved), "--to", to, "--out", str(tmp_path / good)]) == 0
+    assert (tmp_path / good).stat().st_size > 0

@@ -21,6 +21,8 @@ from ..render._brdf import rgb_brdf
 from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
 
 FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
+#: the suffixes ``--out`` may end in for each of :data:`FORMATS` (the standard targets' writers check their own)
+SUFFIXES = {"mitsuba": (".py",), "brdf-explorer": (".brdf",), "glsl": (".glsl", ".frag"), "merl": (".binary",)}
 
 #: the Mitsuba plugin file: user strings (the model's path, its lane, the plugin name) appear only as ``repr``
 #: literals in the three assignments below the docstring, never in the docstring or a comment
@@ -100,6 +102,9 @@ def run_export(args) -> int:
     if args.to in TARGETS:
         return run_standard_export(args)
     src = Path(args.model)
+    if args.out and Path(args.out).suffix.lower() not in SUFFIXES[args.to]:
+        raise InputError(f"--out: expected a file name ending in {' or '.join(SUFFIXES[args.to])} for --to "
+                         f"{args.to}, found {args.out!r}")
     out = check_output_file(Path(args.out) if args.out else src.with_suffix(FORMATS[args.to]), "--out")
     if args.to == "mitsuba":
         check_plugin_name(args.name, "--name")
