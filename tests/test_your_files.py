@@ -5,6 +5,7 @@ loopback names (docs/robustness.md, "Your files"). One test per item, named afte
 
 import ast
 import http.client
+import importlib.util
 import json
 import os
 import pickle
@@ -190,8 +191,26 @@ def test_generated_plugin_holds_paths_only_as_literals(saved_model, tmp_path):
     tree = ast.parse(out.read_text())
     assert str(saved_model.parent.name) not in ast.get_docstring(tree)
     constants = {t.targets[0].id: ast.literal_eval(t.value) for t in tree.body if isinstance(t, ast.Assign)}
-    assert constants == {"MODEL": str(saved_model.resolve()), "INDEX": None, "NAME": "mine"}
+    assert constants == {"MODEL": os.path.relpath(saved_model.resolve(), tmp_path.resolve()), "INDEX": None,
+                         "NAME": "mine"}
     assert all(not line.lstrip().startswith("#") or '"""' not in line for line in out.read_text().splitlines())
+
+
+def test_generated_plugin_finds_its_model_after_both_move(tmp_path):
+    """The plugin names its model relative to its own folder: moved together (here: a folder renamed), the plugin
+    still loads it; the model file is read, nothing else."""
+    (tmp_path / "a").mkdir()
+    model = pj.save_model(tmp_path / "a" / "m.npz", _model())
+    out = tmp_path / "a" / "plugin.py"
+    assert main(["export", str(model), "--to", "mitsuba", "--out", str(out)]) == 0
+    (tmp_path / "a").rename(tmp_path / "b")
+    spec = importlib.util.spec_from_file_location("moved_plugin", tmp_path / "b" / "plugin.py")
+    plugin = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(plugin)
+    assert plugin.MODEL == "m.npz" and plugin.model_path() == str(tmp_path / "b" / "m.npz")
+    loaded = pj.load_model(plugin.model_path())
+    u = np.array([[0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(np.asarray(loaded(u, u)), np.asarray(_model()(u, u)))
 
 
 # ---------------------------------------------------------------- item 5: temporary files

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -39,13 +40,20 @@ INDEX = {index}
 NAME = {name}
 
 
+def model_path():
+    """MODEL, relative to this file's folder unless absolute: the plugin and its model move together."""
+    import os
+
+    return MODEL if os.path.isabs(MODEL) else os.path.join(os.path.dirname(os.path.abspath(__file__)), MODEL)
+
+
 def register(name=NAME):
     import jax
 
     jax.config.update("jax_enable_x64", True)
     import polyjax as pj
 
-    model = pj.load_model(MODEL)
+    model = pj.load_model(model_path())
     if INDEX is not None:
         model = model[INDEX]
     return pj.export.register_mitsuba_bsdf(model, name)
@@ -130,10 +138,20 @@ def run_export(args) -> int:
         if isinstance(model, pj.PolynomialBRDF):
             program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
         rgb_brdf(model)
-        text = _MITSUBA_SCRIPT.format(model=repr(str(src.resolve())), index=repr(index), name=repr(args.name))
+        text = _MITSUBA_SCRIPT.format(model=repr(_relative_to(src, out.parent)), index=repr(index),
+                                      name=repr(args.name))
         write_bytes_atomically(out, text.encode())
     print(f"wrote {out} ({args.to})")
     return 0
+
+
+def _relative_to(path: Path, folder: Path) -> str:
+    """``path`` relative to ``folder`` (``..`` allowed), absolute where there is no relative path (another
+    drive)."""
+    try:
+        return os.path.relpath(path.resolve(), folder.resolve())
+    except ValueError:
+        return str(path.resolve())
 
 
 def _run_rgl_export(args) -> int:
