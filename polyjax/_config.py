@@ -71,6 +71,23 @@ def has_data_root(root: str | os.PathLike | None = None) -> bool:
     return True
 
 
+def given_or_under_root(path: str | os.PathLike, relatives, exists, root: str | os.PathLike | None = None):
+    """``(found, tried)``: ``path`` itself when ``exists(path)``, else the first ``<data root>/<r>`` of ``relatives``
+    that exists (looked for only when ``path`` is relative and a data root is given or configured), or None; and
+    every place looked at, in order (for the caller's error)."""
+    p = Path(path)
+    tried = [str(p)]
+    if exists(p):
+        return path, tried
+    if (root is not None or has_data_root()) and not p.is_absolute():
+        base = data_root(root)
+        for r in relatives:
+            if exists(base / r):
+                return base / r, tried + [str(base / r)]
+            tried.append(str(base / r))
+    return None, tried
+
+
 def data_file(relative: str, root: str | os.PathLike | None = None) -> Path:
     """A file below the data root, with an error saying where it looked when missing."""
     base = data_root(root)

@@ -176,7 +176,6 @@ def test_clamped_fit_from_images_is_bounded_under_lights_outside_the_fitted_rang
 
 
 def test_fit_photos_clamps_by_default(synthetic, tmp_path):
-
     folder, _ = synthetic
     for flags, clamp in (([], True), (["--no-clamp"], False)):
         path = tmp_path / f"m{len(flags)}.json"
@@ -267,7 +266,6 @@ def test_fit_derivative_wrt_images_matches_finite_differences(synthetic, opts):
 
 
 def test_fit_photos_and_relight_command_line(synthetic, tmp_path, capsys):
-
     folder, cap = synthetic
     model = tmp_path / "model.npz"
     with pytest.raises(SystemExit):
@@ -307,7 +305,6 @@ def test_diligent_ball_loads(data_root):
 
 def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path):
     """``polyjax fit-photos`` and ``pj.fit_polynomial_to_images`` with no options make the same model, clamped."""
-
     folder, _ = synthetic
     path = tmp_path / "m.npz"
     main(["--no-cache", "fit-photos", str(folder), "--save", str(path)])

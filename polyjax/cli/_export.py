@@ -21,9 +21,11 @@ from ..export._rgl import is_rgl_source, rgl_to_merl
 from ..render._brdf import rgb_brdf
 from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
 
-FORMATS = {"mitsuba": ".py", "brdf-explorer": ".brdf", "glsl": ".glsl", "merl": ".binary"}
-#: the suffixes ``--out`` may end in for each of :data:`FORMATS` (the standard targets' writers check their own)
+#: the suffixes ``--out`` may end in for each target written here, the default first (the standard targets'
+#: writers check their own)
 SUFFIXES = {"mitsuba": (".py",), "brdf-explorer": (".brdf",), "glsl": (".glsl", ".frag"), "merl": (".binary",)}
+#: target -> the default suffix of its output
+FORMATS = {to: suffixes[0] for to, suffixes in SUFFIXES.items()}
 
 #: the Mitsuba plugin file: user strings (the model's path, its lane, the plugin name) appear only as ``repr``
 #: literals in the three assignments below the docstring, never in the docstring or a comment

@@ -18,7 +18,6 @@ from ._args import (
     add_model_options,
     add_subsample_option,
     check_degrees_fit,
-    check_subsample,
     load_dataset,
     spec_from_args,
     strict_json,
@@ -91,7 +90,6 @@ def cmd_fit(args) -> int:
     kind, model_name = (None, "polynomial") if polynomial else fitter_for(args.model)
     if args.save:
         check_model_file(args.save, "--save")
-    check_subsample(args.subsample)
     data, synthetic = load_dataset(args)
     if wants_compact(args, data, given):
         return run_compact(args, data)
@@ -165,7 +163,7 @@ def _fit_record(args, data, synthetic, model, model_name, degrees, degree, l2, z
         warnings_ += status_warnings(np.asarray(model.status), labels)
     out = {
         "source": data.source,
-        "n_samples": int(data.values.shape[-1]),
+        "n_samples": data.n_samples,
         "synthetic": synthetic,
         "model": model_name,
         "names": list(data.names),

@@ -64,7 +64,7 @@ def run_compact(args, data) -> int:
     names = list(data.names) if len(data.names) else [""]
     out = {"source": data.source, "model": "compact", "budget": budget, "metric": args.metric,
            "family": model.family, "config": repr(model.config), "n_numbers": model.n_numbers,
-           "n_samples": int(data.values.shape[-1]), "names": names, "l2": np.asarray(model.l2).tolist(),
+           "n_samples": data.n_samples, "names": names, "l2": np.asarray(model.l2).tolist(),
            "log": np.asarray(model.log).tolist(),
            "seconds": elapsed}
     if args.save:

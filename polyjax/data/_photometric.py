@@ -36,7 +36,7 @@ import numpy as np
 import png
 import scipy.io
 
-from .._config import data_root, has_data_root
+from .._config import given_or_under_root
 from .._errors import DataFormatError, DataNotFoundError, InputError
 from .._files import inside_folder
 from .._reading.bounded import checked_size, read_bytes, read_text
@@ -327,16 +327,10 @@ def resolve_photometric_folder(folder: str | os.PathLike, root: str | os.PathLik
     (:data:`PHOTOMETRIC_FOLDERS`, e.g. ``"catPNG"``); :class:`polyjax.DataNotFoundError` naming every place tried
     when none is a folder."""
     folder = os.fspath(folder)
-    if os.path.isdir(folder):
-        return folder
-    tried = [folder]
-    if (root is not None or has_data_root()) and not os.path.isabs(folder):
-        base = os.fspath(data_root(root))
-        for sub in PHOTOMETRIC_FOLDERS:
-            candidate = os.path.join(base, sub, folder)
-            if os.path.isdir(candidate):
-                return candidate
-            tried.append(candidate)
+    found, tried = given_or_under_root(folder, [os.path.join(sub, folder) for sub in PHOTOMETRIC_FOLDERS],
+                                       os.path.isdir, root)
+    if found is not None:
+        return os.fspath(found)
     raise DataNotFoundError(f"{folder}: not a folder (expected a DiLiGenT object folder, e.g. pmsData/ballPNG, or "
                             f"an object's name under the data root's {' or '.join(PHOTOMETRIC_FOLDERS)}; looked at "
                             f"{', '.join(tried)})")

@@ -44,7 +44,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._arrays import device_array
-from .._config import data_root, has_data_root
+from .._config import given_or_under_root
 from .._errors import DataNotFoundError, InputError
 from .._measurements import Measurements
 from ._errors import HeaderError, NonFiniteValueError
@@ -346,15 +346,10 @@ def resolve_rgl_path(path: str | os.PathLike, root: str | os.PathLike | None = N
     """A file path as given, else ``<data root>/rgl_epfl/<name>`` (``.bsdf`` added when missing), e.g.
     ``"paper_white_rgb"``; :class:`polyjax.DataNotFoundError` naming both places when neither exists."""
     p = Path(path)
-    if p.is_file():
-        return p
-    tried = [str(p)]
-    if (root is not None or has_data_root()) and not p.is_absolute():
-        base = Path(data_root(root)) / "rgl_epfl"
-        for c in (base / p, base / (p.name + ".bsdf")):
-            if c.is_file():
-                return c
-            tried.append(str(c))
+    found, tried = given_or_under_root(p, (Path("rgl_epfl") / p, Path("rgl_epfl") / (p.name + ".bsdf")), Path.is_file,
+                                       root)
+    if found is not None:
+        return found
     raise DataNotFoundError(f"RGL-EPFL measured BSDF file {str(path)!r}: no such file (looked at {', '.join(tried)})")
 
 
