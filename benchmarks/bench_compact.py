@@ -343,7 +343,8 @@ def main():
     n_family = min(args.family_materials, len(names))
     rows, ctimes = compact_choices(names, fit, score, budgets, FAMILY_SETS, n_family)
     pub = published_rows(names, score)
-    n_base = len(names) if args.baseline_materials is None else min(args.baseline_materials, len(names))
+    n_base = 0 if args.no_baselines else (len(names) if args.baseline_materials is None
+                                          else min(args.baseline_materials, len(names)))
     base = {} if args.no_baselines else baseline_rows(names[:n_base], fit, score)
     worst, _ = old_default_worst(names, fit, score)
     times = fit_times(fit)

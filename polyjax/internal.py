@@ -32,7 +32,8 @@ the user API is, but they follow polyjax's internals, so their arguments may gro
   :func:`fit_compact_family` (one family's configuration fitted, no choice:
   benchmarks, checks), :func:`choose_compact` (:func:`polyjax.fit_compact`'s choice among family objects of one's
   own, e.g. a basis learned without the material; a :class:`CompactChoice`), :func:`compact_fold_ids` (the
-  fold of each sample in its cross-validation), :func:`compact_fold_parts` (the folds as index arrays);
+  fold of each sample in its cross-validation), :func:`compact_fold_parts` (the folds as index arrays),
+  :func:`compact_choice_order` (the order of the refits: ties within :data:`COMPACT_TIE` by the other metric);
 - saved programs: :data:`SAVED_PROGRAMS_ENV`, :data:`SAVED_PROGRAMS_FOLDER`, :func:`program_key`,
   :func:`source_stamp`, :func:`load_lapack_kernels`, :func:`cache_disabled_by_env`, :func:`compile_for_saving`,
   :func:`save_program`, :func:`load_program` (a fitter keeping its compiled executable beside the compilation cache,
@@ -58,6 +59,8 @@ from ._compact.families.sparse import select as compact_select_columns
 from ._compact.families.sparse import unpack as compact_unpack_mask
 from ._compact.fit import Choice as CompactChoice
 from ._compact.fit import choose_compact, fit_compact_family
+from ._compact.select import TIE as COMPACT_TIE
+from ._compact.select import choice_order as compact_choice_order
 from ._compact.select import fold_ids as compact_fold_ids
 from ._compact.select import fold_parts as compact_fold_parts
 from ._config import configured_data_root, data_file
@@ -88,6 +91,6 @@ __all__ = [
     "COMPACT_FAMILIES", "CompactBasisFamily", "CompactChoice", "CompactSharedFamily", "CompactSkewFamily",
     "CompactSparseFamily", "compact_pack_mask", "compact_select_columns", "compact_unpack_mask",
     "choose_compact",
-    "compact_fold_ids", "compact_fold_parts", "fit_compact_family",
+    "compact_fold_ids", "compact_fold_parts", "fit_compact_family", "COMPACT_TIE", "compact_choice_order",
     "Interrupted", "check_interrupt", "install_interrupt_handler",
 ]

@@ -10,8 +10,10 @@ import polyjax as pj
 from benchmarks.learn_compact_basis import learn
 from polyjax.internal import (
     COMPACT_FAMILIES,
+    COMPACT_TIE,
     CompactBasisFamily,
     choose_compact,
+    compact_choice_order,
     compact_fold_ids,
     compact_pack_mask,
     compact_select_columns,
@@ -315,3 +317,18 @@ def test_sparse_gradients_match_finite_differences(merl):
         assert float(g_c[i]) == pytest.approx(float(loss(c0 + e, u) - loss(c0 - e, u)) / (2 * h), rel=1e-5)
     e = jnp.zeros_like(u).at[2, 0].set(h)
     assert float(g_u[2, 0]) == pytest.approx(float(loss(c0, u + e) - loss(c0, u - e)) / (2 * h), rel=1e-4)
+
+
+def test_choice_order_takes_the_tie_better_on_the_other_metric():
+    """Candidates within ``COMPACT_TIE`` of the least held-out error are tied and refitted in the order of their
+    error in the other metric; the rest follow by their own error; a non-finite score comes last."""
+    inside, outside = 1.0 + 0.9 * COMPACT_TIE, 1.0 + 1.1 * COMPACT_TIE
+    primary = [outside, 1.0, inside, np.inf, 1.5]
+    secondary = [0.1, 3.0, 2.0, 0.0, 0.5]
+    assert compact_choice_order(primary, secondary) == [2, 1, 0, 4, 3]
+    # no tie: the order of the metric asked for, whatever the other says
+    assert compact_choice_order([2.0, 1.0, 3.0], [0.0, 9.0, 1.0]) == [1, 0, 2]
+    # equal scores keep the order they were tried in
+    assert compact_choice_order([1.0, 1.0], [5.0, 5.0]) == [0, 1]
+    # nothing finite: every candidate tied, by the other metric
+    assert compact_choice_order([np.inf, np.inf], [1.0, 0.0]) == [1, 0]
