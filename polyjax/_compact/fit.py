@@ -75,8 +75,8 @@ def fit_compact(data: Measurements, budget: int = DEFAULT_BUDGET, *, metric: str
     returned, refitted on every sample, except that candidates within 5 % of the least are tied and the tie of
     least held-out error in the other metric is taken (``select.TIE``, ``select.choice_order``); a candidate
     whose refit exceeds 10 times the largest measured value at a node of the grid is refused (the next one is
-    refitted). The choice follows one rule for every material; a
-    batch of materials shares one choice (fit materials one at a time for a choice of their own).
+    refitted). The choice follows one rule for every material; a batch of materials shares one choice (fit
+    materials one at a time for a choice of their own).
 
     Args:
         data: :class:`polyjax.Measurements` of RGB values ``(*batch, 3, n)``, directions ``(n, 3)``.

@@ -177,7 +177,7 @@ def choice_order(primary, secondary) -> list[int]:
     (:func:`score` of each, lists of equal length): those within :data:`TIE` of the least primary score (the ties)
     by their secondary score, then the rest by their primary score (ties of a score kept in the order given)."""
     primary, secondary = np.asarray(primary, float), np.asarray(secondary, float)
-    tied = primary <= (1.0 + TIE) * np.min(primary) if np.isfinite(np.min(primary)) else primary == np.min(primary)
+    tied = primary <= (1.0 + TIE) * np.min(primary)  # every one when none is finite (scores are never NaN)
     first = sorted(np.nonzero(tied)[0], key=lambda i: (secondary[i], primary[i], i))
     rest = sorted(np.nonzero(~tied)[0], key=lambda i: (primary[i], i))
     return [int(i) for i in first + rest]
