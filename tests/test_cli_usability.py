@@ -216,3 +216,12 @@ def test_export_out_must_end_in_the_target_s_suffix(capsys, tmp_path, two_merl, 
     assert "--out: expected a file name ending in" in err and bad in err and not (tmp_path / bad).exists()
     assert main(["export", str(saved), "--to", to, "--out", str(tmp_path / good)]) == 0
     assert (tmp_path / good).stat().st_size > 0
+
+
+def test_export_of_an_rgl_file_checks_the_out_suffix_too(capsys, tmp_path, data_root):
+    """The RGL-EPFL route of ``export --to merl`` names its output through the same check: a ``.txt`` is refused
+    before the file is read."""
+    bad = tmp_path / "paper.txt"
+    assert main(["export", "rgl:paper_white_rgb", "--to", "merl", "--out", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "--out: expected a file name ending in .binary for --to merl" in err and not bad.exists()

@@ -112,10 +112,7 @@ def run_export(args) -> int:
     if args.to in TARGETS:
         return run_standard_export(args)
     src = Path(args.model)
-    if args.out and Path(args.out).suffix.lower() not in SUFFIXES[args.to]:
-        raise InputError(f"--out: expected a file name ending in {' or '.join(SUFFIXES[args.to])} for --to "
-                         f"{args.to}, found {args.out!r}")
-    out = check_output_file(Path(args.out) if args.out else src.with_suffix(FORMATS[args.to]), "--out")
+    out = _output_file(args, src.with_suffix(FORMATS[args.to]))
     if args.to == "mitsuba":
         check_plugin_name(args.name, "--name")
     model = pj.load_model(src)
@@ -147,6 +144,15 @@ def run_export(args) -> int:
     return 0
 
 
+def _output_file(args, default: Path) -> Path:
+    """``--out`` (or ``default``) checked before any work: its suffix one of the target's (:data:`SUFFIXES`), then
+    :func:`check_output_file`'s checks."""
+    if args.out and Path(args.out).suffix.lower() not in SUFFIXES[args.to]:
+        raise InputError(f"--out: expected a file name ending in {' or '.join(SUFFIXES[args.to])} for --to "
+                         f"{args.to}, found {args.out!r}")
+    return check_output_file(Path(args.out) if args.out else default, "--out")
+
+
 def _relative_to(path: Path, folder: Path) -> str:
     """``path`` relative to ``folder`` (``..`` allowed), absolute where there is no relative path (another
     drive)."""
@@ -165,7 +171,7 @@ def _run_rgl_export(args) -> int:
         raise pj.InputError(f"--to: an RGL-EPFL file converts to 'merl', {', '.join(sorted(TARGETS))}, found "
                             f"{args.to!r}")
     name = args.model[4:] if args.model.lower().startswith("rgl:") else args.model
-    out = check_output_file(Path(args.out) if args.out else Path(Path(name).stem + FORMATS["merl"]), "--out")
+    out = _output_file(args, Path(Path(name).stem + FORMATS["merl"]))
     rgl_to_merl(name, out, root=getattr(args, "data_root", None))
     print(f"wrote {out} (merl, from the RGL-EPFL file {name})")
     return 0
