@@ -5,6 +5,7 @@ DiLiGenT's layout with 16-bit PNGs, and loaded back: the float images refit exac
 within the quantisation. The shared capture is loaded and compared with a direct pypng reading.
 """
 
+import json
 import os
 import shutil
 
@@ -16,6 +17,7 @@ import pytest
 
 import polyjax as pj
 from polyjax.cli import main
+from polyjax.cli._photos import MAX_CONDITION
 from polyjax.render import Camera, DirectionalLight, Lambertian, NormalMap, Scene, Sphere, render
 
 from _fuzz_problems import write_diligent as write_fuzz_diligent
@@ -303,16 +305,49 @@ def test_diligent_ball_loads(data_root):
     np.testing.assert_allclose(np.linalg.norm(cap.normals[cap.mask], axis=-1), 1.0, atol=1e-6)
 
 
-def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path):
-    """``polyjax fit-photos`` and ``pj.fit_polynomial_to_images`` with no options make the same model, clamped."""
+def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path, capsys):
+    """``polyjax fit-photos --degree 8`` and ``pj.fit_polynomial_to_images`` with no options make the same model,
+    clamped; with ``--degree`` left out, the command steps down from 8 to the highest well-conditioned degree (these
+    8 lights do not determine degree 8) and says which degrees it left out and why."""
     folder, _ = synthetic
     path = tmp_path / "m.npz"
-    main(["--no-cache", "fit-photos", str(folder), "--save", str(path)])
+    main(["--no-cache", "fit-photos", str(folder), "--degree", "8", "--save", str(path)])
     cap = pj.data.load_photometric(folder).cropped()
     api = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=cap.saturation)
     saved = pj.load_model(path)
     assert saved.spec == api.spec and api.clamp and api.link == "log" and api.variables == "rusinkiewicz"
     np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-9, atol=1e-12)
+    capsys.readouterr()
+    auto = tmp_path / "a.npz"
+    assert main(["--no-cache", "fit-photos", str(folder), "--json", "--save", str(auto)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    model = pj.load_model(auto)
+    p = model.max_degree
+    assert 1 <= p < 8 and out["degree"] == p and [d for d, _ in out["degrees_left_out"]] == list(range(8, p, -1))
+    assert max(out["condition_rgb"]) <= MAX_CONDITION and out["status_rgb"] == ["OK"] * 3
+    higher = pj.fit_polynomial_to_images(cap.scenes, cap.images, degree=p + 1, saturation=cap.saturation)
+    assert (np.any(np.asarray(higher.status) != 0)
+            or float(np.max(np.asarray(higher.condition))) > MAX_CONDITION)  # the next degree up is not kept
+    same = pj.fit_polynomial_to_images(cap.scenes, cap.images, degree=p, saturation=cap.saturation)
+    np.testing.assert_allclose(np.asarray(model.coefficients), np.asarray(same.coefficients), rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_fit_photos_with_few_lights_keeps_a_degree_that_relights_them(data_root, tmp_path, capsys):
+    """DiLiGenT's ball from 6 of its lights: at the API's degree 8 the fit is rank-deficient and relights the
+    interleaved 6 others at a relative RMS above 1; ``fit-photos`` with ``--degree`` left out keeps a lower degree
+    that relights them within 0.15."""
+    ball = str(data_root / "diligent" / "ballPNG")
+    errs = {}
+    for name, extra in (("auto", []), ("eight", ["--degree", "8"])):
+        path = tmp_path / f"{name}.npz"
+        main(["--no-cache", "fit-photos", ball, "--lights", "0:48:8", *extra, "--save", str(path)])
+        capsys.readouterr()
+        assert main(["--no-cache", "relight", str(path), ball, "--lights", "1:48:8", "--json",
+                     "--out", str(tmp_path / name)]) == 0
+        errs[name] = json.loads(capsys.readouterr().out)["relative_rms_all"]
+    assert pj.load_model(tmp_path / "auto.npz").max_degree < 8
+    assert errs["auto"] < 0.15 and errs["eight"] > 1.0, errs
 
 
 def test_a_capture_folder_by_name_is_found_under_the_data_root(tmp_path, monkeypatch, capsys):

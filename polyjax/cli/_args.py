@@ -69,18 +69,20 @@ def add_image_options(p: argparse.ArgumentParser, size_help: str, exposure_help:
     p.add_argument("--exposure", type=float, default=0.0, help=exposure_help)
 
 
-def add_model_options(p: argparse.ArgumentParser, defaults: PolynomialSpec, *, several: bool = False) -> None:
+def add_model_options(p: argparse.ArgumentParser, defaults: PolynomialSpec, *, several: bool = False,
+                      degree_default: str | None = None) -> None:
     """The polynomial model's definition on ``p``, with the command's ``defaults``: ``--variables``, ``--degree``
     (``--degrees``; comma-separated degrees when ``several``), ``--basis``, ``--interactions`` /
     ``--no-interactions``, ``--link``, ``--eps``, ``--clamp`` / ``--no-clamp``; :func:`spec_from_args` reads them
-    back."""
+    back. ``degree_default``: the help's words for a command whose ``--degree`` left out is None (the command then
+    chooses it) rather than ``defaults.degree``."""
     degrees = ",".join(map(str, defaults.degree)) if isinstance(defaults.degree, tuple) else str(defaults.degree)
     p.add_argument("--variables", default=defaults.variables,
                    help="explanatory variable set: " + " | ".join(BUILTIN_VARIABLES)
                    + f" (default {defaults.variables})")
-    p.add_argument("--degree", "--degrees", dest="degree", default=degrees,
+    p.add_argument("--degree", "--degrees", dest="degree", default=degrees if degree_default is None else None,
                    help="polynomial degree p" + (", or comma-separated degrees fitted in one batch (e.g. 2,3,5)"
-                                                 if several else "") + f"; default {degrees}")
+                                                 if several else "") + f"; default {degree_default or degrees}")
     p.add_argument("--basis", default=defaults.basis, choices=["legendre", "monomial"],
                    help=f"basis of the solve: scaled Legendre (well conditioned) or the paper's monomials "
                    f"(default {defaults.basis})")
