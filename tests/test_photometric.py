@@ -311,7 +311,9 @@ def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_p
     8 lights do not determine degree 8) and says which degrees it left out and why."""
     folder, _ = synthetic
     path = tmp_path / "m.npz"
-    main(["--no-cache", "fit-photos", str(folder), "--degree", "8", "--save", str(path)])
+    main(["--no-cache", "fit-photos", str(folder), "--degree", "8", "--json", "--save", str(path)])
+    eight = json.loads(capsys.readouterr().out)  # strict JSON: a rank-deficient fit's condition number is null
+    assert eight["degree"] == 8 and eight["degrees_left_out"] == []
     cap = pj.data.load_photometric(folder).cropped()
     api = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=cap.saturation)
     saved = pj.load_model(path)

@@ -26,7 +26,7 @@ from .._config import check_model_file, check_output_dir
 from .._errors import InputError
 from .._files import write_atomically
 from ..render._image import write_exr, write_png
-from ._args import add_model_options, spec_from_args
+from ._args import add_model_options, spec_from_args, strict_json
 from ._capture_out import textures_folder, write_textures_beside
 
 #: the command line's fit: measured on the DiLiGenT ball (``benchmarks/bench_photometric.py``): the model (clamped to
@@ -43,9 +43,10 @@ DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=_API["rob
 #: weighted design at most this, in every channel. With few lights the pixels' BRDF samples lie on a few sheets
 #: (under one view, a light's polar angle fixes ``theta_d`` at every pixel), and a high degree swings between them,
 #: rank-deficient or not: on DiLiGenT's objects with 6-8 lights, ``p = 8`` relit held-out lights at relative RMS
-#: 2.3 to 3e27, and fits of condition 100 or more were 2-10^22 times worse than the best degree. Chosen on the ball,
-#: cat and pot1, checked on bear, goblet and pot2: the degree kept is within 1.35x of the best degree's held-out
-#: error on all 21 cases, and 8 itself from 12 lights up on the ball (``benchmarks/RESULTS.md``, "few lights")
+#: 2.3 to 3e27, and the fits this bound leaves out were up to 10^22 times worse than the best degree. Chosen on
+#: the ball, cat and pot1, checked on bear, goblet and pot2: the degree kept is within 1.35x of the best degree's
+#: held-out error on all 21 cases, and 8 itself from 12 lights up on the ball (``benchmarks/RESULTS.md``, "few
+#: lights")
 MAX_CONDITION = 50.0
 
 
@@ -159,7 +160,7 @@ def run_fit_photos(args) -> int:
            "status_rgb": status, "condition_rgb": [float(c) for c in np.asarray(model.condition)],
            "degrees_left_out": tried, "fit_seconds": seconds, "saved": str(save)}
     if args.json:
-        print(json.dumps(out))
+        print(strict_json(out))
     else:
         print(f"fit-photos: {out['lights']} lights, {out['pixels_used']} pixel samples, {spec.variables} "
               f"p={spec.degree}{' with interactions' if spec.interactions else ''}, link {spec.link}, "
