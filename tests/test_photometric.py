@@ -17,10 +17,12 @@ import pytest
 
 import polyjax as pj
 from polyjax.cli import main
-from polyjax.cli._photos import MAX_CONDITION
 from polyjax.render import Camera, DirectionalLight, Lambertian, NormalMap, Scene, Sphere, render
 
 from _fuzz_problems import write_diligent as write_fuzz_diligent
+
+#: ``fit-photos``' bound on the condition number of the degree it keeps (its --help and docs/photometric.md)
+MAX_CONDITION = 50.0
 
 H, W = 12, 14  # a small frame: the sphere's disc inside it
 LIGHTS = np.array([[0.1, 0.2, 1.0], [-0.5, 0.3, 0.8], [0.6, -0.2, 0.75], [0.0, -0.6, 0.8], [0.4, 0.5, 0.7],
