@@ -12,6 +12,7 @@ map), and prints the relative RMS and PSNR.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import inspect
 import json
 import time
@@ -179,18 +180,17 @@ def fit_well_conditioned(capture, spec, **options):
     degree, then one degree lower at a time while the fit is rank-deficient or its condition number exceeds
     :data:`MAX_CONDITION` in a channel, down to degree 1. Returns the model kept and ``[(degree, why), ...]`` of
     the degrees left out."""
-    tried = []
-    for p in range(int(spec.degree), 0, -1):
-        s = pj.PolynomialSpec(spec.variables, p, spec.basis, spec.interactions, spec.link, spec.eps, spec.clamp)
-        model = pj.fit_polynomial_to_images(capture.scenes, capture.images, spec=s, **options)
+    tried, p = [], int(spec.degree)
+    while True:
+        model = pj.fit_polynomial_to_images(capture.scenes, capture.images, spec=dataclasses.replace(spec, degree=p),
+                                            **options)
         names = [pj.RESULTS(int(c)).name for c in np.asarray(model.status)]
-        cond = float(np.max(np.asarray(model.condition)))
-        if p == 1 or (all(n == "OK" for n in names) and cond <= MAX_CONDITION):
+        ok, cond = all(n == "OK" for n in names), float(np.max(np.asarray(model.condition)))
+        if p <= 1 or (ok and cond <= MAX_CONDITION):
             return model, tried
-        why = (f"status {', '.join(names)}" if any(n != "OK" for n in names)
-               else f"condition number {cond:.3g} > {MAX_CONDITION:g}")
+        why = f"condition number {cond:.3g} > {MAX_CONDITION:g}" if ok else f"status {', '.join(names)}"
         tried.append((p, f"{why} with {capture.n_lights} lights"))
-    raise AssertionError("unreachable")
+        p -= 1
 
 
 def errors_of(predicted, capture):
