@@ -81,17 +81,20 @@ def module_kind(cls, kind: str, *, models: tuple[str, ...] = (), fit=None, statu
     static = tuple(f.name for f in fields if f.metadata.get("static", False))
     arrays = tuple(f.name for f in fields if not f.metadata.get("static", False))
 
-    def to_arrays(model):
-        return {k: getattr(model, k) for k in static}, {k: np.asarray(getattr(model, k)) for k in arrays}
+    def to_arrays(model):  # an array field of None (an optional one, e.g. PolynomialBRDF.log_top) is not stored
+        return ({k: getattr(model, k) for k in static},
+                {k: np.asarray(getattr(model, k)) for k in arrays if getattr(model, k) is not None})
 
-    # static fields with a default (added after files were written, e.g. PolynomialBRDF.link) may be absent
+    # fields with a default (added after files were written, e.g. PolynomialBRDF.link and .log_top) may be absent
     defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
 
     def from_arrays(meta, arrs):
-        missing = [k for k in arrays if k not in arrs] + [k for k in static if k not in meta and k not in defaults]
+        missing = ([k for k in arrays if k not in arrs and k not in defaults]
+                   + [k for k in static if k not in meta and k not in defaults])
         if missing:
             raise KeyError(f"missing fields {missing}")
-        return cls(**{k: device_array(arrs[k]) for k in arrays}, **{k: meta.get(k, defaults.get(k)) for k in static})
+        return cls(**{k: device_array(arrs[k]) if k in arrs else defaults[k] for k in arrays},
+                   **{k: meta.get(k, defaults.get(k)) for k in static})
 
     return ModelKind(kind=kind, type=cls, to_arrays=to_arrays, from_arrays=from_arrays, models=tuple(models), fit=fit,
                      status_names=tuple(status_names))

@@ -162,6 +162,11 @@ class PolynomialBRDF(eqx.Module):
             False (the default): the polynomial everywhere. Legendre basis only (a monomial model keeps no
             range). Every evaluator honours it: calls, renders, the GLSL, numpy and Dr.Jit exports (the Mitsuba
             plugin, the viewer) and MERL tables; it does not change the fit.
+        log_top: ``(*batch,)`` the log link's bound on the polynomial: ``f = exp(min(P, log_top)) - eps``, with
+            ``log_top`` the largest ``P`` at the fitted samples (:func:`polyjax.fit_log_polynomial` sets it), so the
+            model never exceeds its largest value at the samples, between them included (with few samples a
+            degree-8 ``P`` reaches 50 between them: ``f`` of 1e22). None (the identity link, and models saved
+            before the field existed): no bound. Every evaluator honours it, as :attr:`clamp`.
     """
 
     coefficients: Float[Array, "*batch m"]
@@ -182,6 +187,7 @@ class PolynomialBRDF(eqx.Module):
     link: str = eqx.field(static=True, default="identity")  # log link: f = exp(poly) - eps (polyjax._fit.log)
     eps: float = eqx.field(static=True, default=0.0)
     clamp: bool = eqx.field(static=True, default=False)  # constant extension outside the fitted box (docs above)
+    log_top: Float[Array, "*batch"] | None = None  # the log link's bound on P (docs above)
 
     def __check_init__(self):
         if not isinstance(self.clamp, bool):  # a static field: hashed, and saved as JSON
@@ -246,6 +252,13 @@ class PolynomialBRDF(eqx.Module):
         u, v = call_directions(u, v, self.coefficients.dtype)
         return _evaluate(self, u, v)
 
+    def polynomial(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "*batch ..."]:
+        """The polynomial ``P`` itself at light directions ``u`` and view directions ``v``: the BRDF of the identity
+        link, ``log(f + eps)`` of the log link before its bound :attr:`log_top` (:attr:`clamp` applies); 0 where
+        ``u`` or ``v`` is below the horizon or has no direction. Arguments as :meth:`__call__`."""
+        u, v = call_directions(u, v, self.coefficients.dtype)
+        return _evaluate(self, u, v, raw=True)
+
     def paper_coefficients(self) -> np.ndarray:
         r"""The coefficients ``beta`` of equation (3) in the paper's monomials of the raw components.
 
@@ -306,10 +319,11 @@ def evaluate_paper_form(beta: ArrayLike, z: ArrayLike, degree: int) -> Array:
 __all__ = ["PolynomialBRDF", "PolynomialSpec", "evaluate_paper_form", "exponents"]
 
 
-@jax.jit
-def _evaluate(model: PolynomialBRDF, u, v):
+@functools.partial(jax.jit, static_argnames=("raw",))
+def _evaluate(model: PolynomialBRDF, u, v, raw: bool = False):
     """:meth:`PolynomialBRDF.__call__` after its checks: one compiled program per model family and shapes (op by
-    op, each of its few dozen operations would be compiled on its own for every new shape)."""
+    op, each of its few dozen operations would be compiled on its own for every new shape); ``raw``: the polynomial
+    without the link (:meth:`PolynomialBRDF.polynomial`)."""
     dtype = model.coefficients.dtype
     u, ok_u = safe_normalize(jnp.asarray(u, dtype))
     v, ok_v = safe_normalize(jnp.asarray(v, dtype))
@@ -324,7 +338,10 @@ def _evaluate(model: PolynomialBRDF, u, v):
         flat = jax.tree.map(lambda a: a.reshape((-1,) + a.shape[nb:]), params)
         out = jax.vmap(lambda p: model._lane(p, x))(flat)
         out = out.reshape(model.batch_shape + out.shape[1:])
-    if model.link == "log":  # f = exp(poly) - eps (polyjax._fit.log)
+    if model.link == "log" and not raw:  # f = exp(min(poly, log_top)) - eps (polyjax._fit.log)
+        if model.log_top is not None:  # the bound; at P = log_top the polynomial's derivative (not min's 1/2)
+            top = jnp.reshape(model.log_top, model.batch_shape + (1,) * (out.ndim - nb))
+            out = jnp.where(out > top, top, out)
         out = jnp.exp(out) - model.eps
     return jnp.where(above, out, 0.0)
 

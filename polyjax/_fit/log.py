@@ -26,6 +26,11 @@ kernel of :func:`polyjax.fit_polynomial`):
    (argument ``floor``). Every step keeps the best of the step lengths 1, 1/2, 1/4 and of no step, by the L2 of
    equation (11), so the L2 never increases.
 
+The fitted model is bounded by its own largest value at the fitted samples: ``f = exp(min(P, log_top)) - eps``
+with ``log_top = max_i P(u_i, v_i)`` (:attr:`polyjax.PolynomialBRDF.log_top`). At the samples nothing changes;
+between and beyond them ``exp`` of a high-degree polynomial fitted to few samples otherwise reaches 1e22
+(``benchmarks/bench_log_bound.py``).
+
 ``1 + steps`` solves in all (default ``steps=3``: 4 solves). Every solve uses the same samples, hence
 the same principal components and basis, so the coefficients of different steps combine linearly.
 
@@ -47,6 +52,7 @@ solve (``benchmarks/RESULTS.md``).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 
@@ -121,8 +127,9 @@ def fit_log_polynomial(
             of ``variables``, ``degree``, ``basis``, ``interactions``, ``eps`` and ``clamp``.
 
     Returns:
-        :class:`polyjax.PolynomialBRDF` with ``link="log"`` and ``eps``; its ``l2`` is equation (11) of
-        ``f`` on the fitted samples, its ``rank``/``condition``/``status`` those of the last solve.
+        :class:`polyjax.PolynomialBRDF` with ``link="log"``, ``eps`` and the bound ``log_top`` (module docs); its
+        ``l2`` is equation (11) of ``f`` on the fitted samples, its ``rank``/``condition``/``status`` those of the
+        last solve.
         Differentiable with respect to ``values``, ``weights`` and directions wherever
         :func:`polyjax.fit_polynomial` is (the step choice is piecewise constant).
     """
@@ -215,7 +222,19 @@ def _gauss_newton(u, v, values, w, mask, cutoff_deg, opts, *, eps, steps, floor,
             better = l2_c < l2
             model = _select(better, cand, model)
             l2 = jnp.where(better, l2_c, l2)
-    return _with_l2(model, l2)
+    return dataclasses.replace(_with_l2(model, l2), log_top=_log_top(model.polynomial(u, v), keep))
+
+
+#: the bound of a lane without samples: ``log`` of the largest float64, past which ``exp`` overflows anyway (finite,
+#: so that every store of the field, EXR's float32 pairs included, holds it)
+NO_BOUND = float(np.log(np.finfo(np.float64).max))
+
+
+def _log_top(p, keep):
+    """:attr:`polyjax.PolynomialBRDF.log_top`: the largest of the polynomials ``p (*batch, n)`` at the fitted samples
+    (``keep``), per lane; :data:`NO_BOUND` in a lane without samples."""
+    top = jnp.max(jnp.where(keep, p, -jnp.inf), axis=-1)
+    return jnp.where(jnp.any(keep, axis=-1), jnp.minimum(top, NO_BOUND), NO_BOUND)
 
 
 def _same_samples(u, v, w, mask, cutoff_deg) -> bool:
@@ -356,8 +375,8 @@ def _shared_kernel(inp, u, v, w, mask, *, variables, degree, basis, interactions
 
     blank = jax.tree.map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(solve, *start))
     carry = (blank, jnp.zeros(values.shape[:1], values.dtype), jnp.zeros(values.shape, values.dtype))
-    model, l2, _ = jax.lax.fori_loop(0, steps + 1, solve_step, carry)
-    return dict(model, l2=l2)
+    model, l2, p = jax.lax.fori_loop(0, steps + 1, solve_step, carry)
+    return dict(model, l2=l2, log_top=_log_top(p, keep))
 
 
 def _line_search(model: dict, step: dict, l2, p, p_step, score):

@@ -5,7 +5,8 @@ read: static fields of the right types and values, and arrays whose shapes agree
 With batch shape ``B = degree.shape`` and ``k`` principal components: ``coefficients (*B, m)`` with
 ``m = n_terms(k, max_degree, interactions)``; ``mean, centre, halfwidth (*B, k)``; ``rotation (*B, k, k)``;
 ``degree, l2, rank, condition, n_used, status (*B)``; integer ``degree, rank, n_used, status``, float the rest;
-``0 <= degree <= max_degree``; ``k`` that of the variable set when it is registered.
+``0 <= degree <= max_degree``; ``k`` that of the variable set when it is registered; ``log_top (*B)`` (optional),
+float, not NaN, and only with the log link.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from .._variables import get_variables
 
 _INTEGER = ("degree", "rank", "n_used", "status")
 _FLOAT = ("coefficients", "mean", "rotation", "centre", "halfwidth", "l2", "condition")
+#: the optional arrays: absent in a model without them (:attr:`polyjax.PolynomialBRDF.log_top`)
+_OPTIONAL = ("log_top",)
 #: the largest degree a stored model may declare (the fits allow far less; a larger one is a damaged file)
 MAX_DEGREE = 64
 
@@ -48,7 +51,7 @@ def check_polynomial_fields(path, static: dict, arrays: dict) -> None:
     """Raise a DataFormatError naming ``path`` unless ``static`` and ``arrays`` make a consistent polynomial model
     (module docstring). Missing fields are left to the model's own check (it names them)."""
     static = _static(path, static)
-    for name in _INTEGER + _FLOAT:
+    for name in _INTEGER + _FLOAT + _OPTIONAL:
         if name in arrays:
             a = np.asarray(arrays[name])
             want = "i" if name in _INTEGER else "f"
@@ -66,6 +69,14 @@ def check_polynomial_fields(path, static: dict, arrays: dict) -> None:
         if tuple(np.shape(arrays[name])) != shape or k < 1:
             raise DataFormatError(path, f"array {name!r} of shape {shape} (batch {batch} of degree's, k = {k} of "
                                   f"mean's, {m} coefficients)", f"shape {tuple(np.shape(arrays[name]))}")
+    if "log_top" in arrays:
+        top = np.asarray(arrays["log_top"])
+        if static.get("link", "identity") != "log":
+            raise DataFormatError(path, "no array 'log_top' (the log link's bound) with the identity link",
+                                  "an array 'log_top'")
+        if top.shape != batch or np.isnan(top).any():
+            raise DataFormatError(path, f"array 'log_top' of shape {batch}, no NaN",
+                                  f"shape {top.shape}{', NaN' if top.shape == batch else ''}")
     degree = np.asarray(arrays["degree"])
     if degree.size and (degree.min() < 0 or degree.max() > static["max_degree"]):
         raise DataFormatError(path, f"degrees in [0, max_degree = {static['max_degree']}]",

@@ -227,8 +227,13 @@ def _channel(prog: Program, model: PolynomialBRDF, lane: int, x):
         factors = [powers[j][e[j]] for j in range(k) if e[j] > 0]
         terms.append(mul(const(c), *factors) if factors else const(c))
     f = add(*terms) if terms else const(0.0)
-    if model.link == "log":  # f = exp(poly) - eps
-        f = sub(call("exp", prog.assign(f)), const(model.eps))
+    if model.link == "log":  # f = exp(min(poly, log_top)) - eps
+        f = prog.assign(f)
+        if model.log_top is not None:
+            top = float(np.asarray(model.log_top, np.float64).reshape(-1)[lane])
+            if np.isfinite(top):  # inf: a lane without samples, no bound
+                f = prog.assign(call("min", f, const(top)))
+        f = sub(call("exp", f), const(model.eps))
     return prog.assign(f, prefix="f")
 
 

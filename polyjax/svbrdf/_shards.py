@@ -35,6 +35,19 @@ _READABLE = ("polyjax-texture-shards/1", FORMAT)  # /1: npz only, no link/eps (i
 FORMATS = ("npz", "exr")
 _FIELDS = ("coefficients", "degree", "mean", "rotation", "centre", "halfwidth", "l2", "rank", "condition", "n_used",
            "status")
+#: the fields written only where the model has them (:attr:`polyjax.PolynomialBRDF.log_top`, the log link's bound)
+_OPTIONAL = ("log_top",)
+
+
+def _written(model: PolynomialBRDF) -> tuple[str, ...]:
+    """The fields of ``model`` its shards hold: every one of :data:`_FIELDS`, and the optional ones it has."""
+    return _FIELDS + tuple(n for n in _OPTIONAL if getattr(model, n) is not None)
+
+
+def _listed(meta: dict) -> tuple[str, ...]:
+    """The fields a manifest's shards hold: :data:`_FIELDS` and the optional ones its ``fields`` lists."""
+    listed = meta.get("fields")
+    return _FIELDS + tuple(n for n in _OPTIONAL if isinstance(listed, dict) and n in listed)
 
 
 def _rows(index) -> tuple[int, int]:
@@ -70,7 +83,7 @@ def _shard_map(ref) -> dict[tuple[int, int], int]:
 def _local_rows(model: PolynomialBRDF, start: int, stop: int) -> dict[str, np.ndarray]:
     """Every field of ``model`` for rows ``start .. stop``, from this process's shard (never a gather)."""
     parts = {}
-    for name in _FIELDS:
+    for name in _written(model):
         a = getattr(model, name)
         local = [s for s in getattr(a, "addressable_shards", []) if _rows(s.index)[0] == start]
         arr = np.asarray(local[0].data) if local else np.asarray(a[start:stop])
@@ -104,7 +117,7 @@ def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *,
     shards = _shard_map(model.coefficients)
     n_lane = len(model.batch_shape) - 2
     rgb = tuple(model.batch_shape[2:]) == (3,)
-    fields = {n: dict(shape=list(getattr(model, n).shape), dtype=str(getattr(model, n).dtype)) for n in _FIELDS}
+    fields = {n: dict(shape=list(getattr(model, n).shape), dtype=str(getattr(model, n).dtype)) for n in _written(model)}
     if "exr" in formats:
         for n, meta in fields.items():
             meta["exr"] = channel_layout(n, tuple(meta["shape"][2:]), meta["dtype"], n_lane, rgb, exr_precision)
@@ -114,7 +127,7 @@ def write_texture_shards(directory: str | os.PathLike, model: PolynomialBRDF, *,
         if "npz" in formats:
             write_npz_atomically(out / name(start, stop, "npz"), row_start=row0 + start, row_stop=row0 + stop, **parts)
         if "exr" in formats:
-            write_exr_shard(out / name(start, stop, "exr"), parts, {n: fields[n]["exr"] for n in _FIELDS},
+            write_exr_shard(out / name(start, stop, "exr"), parts, {n: fields[n]["exr"] for n in fields},
                             (row0 + start, row0 + stop))
     manifest = out / MANIFEST
     if jax.process_index() == 0:
@@ -179,12 +192,12 @@ def _check_manifest(path: Path, meta: dict) -> None:
             bad(f"shards[{i}]: a file name for each format {formats}", files)
 
 
-def _read_npz_shard(f: Path, rows: int) -> dict[str, np.ndarray]:
+def _read_npz_shard(f: Path, rows: int, names: tuple[str, ...]) -> dict[str, np.ndarray]:
     z = read_npz(f, "an .npz texture shard")
-    for n in _FIELDS:
+    for n in names:
         if n not in z or z[n].ndim < 1 or z[n].shape[0] != rows:
             raise DataFormatError(f, f"field {n!r} with {rows} rows", f"{z[n].shape if n in z else 'none'}")
-    return {n: z[n] for n in _FIELDS}
+    return {n: z[n] for n in names}
 
 
 def _covering(path: Path, meta: dict, lo: int, hi: int) -> list:
@@ -218,15 +231,16 @@ def read_texture_shards(directory: str | os.PathLike, rows: tuple[int, int] | No
     d = Path(directory)
     meta, fmt = _read_manifest(d, format)
     lo, hi = (0, meta["height"]) if rows is None else _checked_rows(rows, meta["height"])
-    pieces = {n: [] for n in _FIELDS}
+    names = _listed(meta)
+    pieces = {n: [] for n in names}
     for shard in _covering(d / MANIFEST, meta, lo, hi):
         a, b = shard["rows"]
         f = inside_folder(d, shard.get("files", {"npz": shard.get("file")})[fmt], d / MANIFEST, f"shard rows {a}-{b}")
         if not f.is_file():
             raise DataNotFoundError(f"expected the texture shard {str(f)!r} listed in {str(d / MANIFEST)!r}; it is "
                                     "missing")
-        got = _read_npz_shard(f, b - a) if fmt == "npz" else _read_exr(d / MANIFEST, f, meta, b - a)
-        for n in _FIELDS:
+        got = _read_npz_shard(f, b - a, names) if fmt == "npz" else _read_exr(d / MANIFEST, f, meta, b - a, names)
+        for n in names:
             pieces[n].append(got[n][max(lo, a) - a: min(hi, b) - a])
     return _texture(d / MANIFEST, meta, pieces)
 
@@ -242,10 +256,10 @@ def _checked_rows(rows, height: int) -> tuple[int, int]:
     return lo, hi
 
 
-def _read_exr(manifest: Path, f: Path, meta: dict, rows: int) -> dict[str, np.ndarray]:
-    """An EXR shard's fields, the manifest's layout of them checked (a missing or mistyped entry named)."""
+def _read_exr(manifest: Path, f: Path, meta: dict, rows: int, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """An EXR shard's fields ``names``, the manifest's layout of them checked (a missing or mistyped entry named)."""
     try:
-        return read_exr_shard(f, {n: meta["fields"][n] for n in _FIELDS}, rows)
+        return read_exr_shard(f, {n: meta["fields"][n] for n in names}, rows)
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:
         if isinstance(e, DataFormatError):
             raise

@@ -95,7 +95,8 @@ def _polynomial_info(model: PolynomialBRDF) -> dict:
             "parameters": [int(n) for n in np.asarray(model.n_params).ravel()],
             "L2": _array_list(model.l2), "coefficients": _array_list(model.coefficients)}
     if model.link != "identity":
-        info["link"] = f"{model.link} (f = exp(poly) - {model.eps:g})"
+        bounded = "min(poly, log_top)" if model.log_top is not None else "poly"
+        info["link"] = f"{model.link} (f = exp({bounded}) - {model.eps:g})"
     if model.clamp:
         info["outside the fitted samples"] = "clamped to the fitted box (constant extension)"
     return info
