@@ -32,6 +32,22 @@ def random_hemisphere(n: int, seed: int = 0, min_cos: float = 0.05) -> tuple[np.
     return draw(), draw()
 
 
+def band_directions(n: int, lo_deg: float, hi_deg: float, seed: int) -> np.ndarray:
+    """``n`` unit directions with polar angles in ``[lo_deg, hi_deg]`` and all azimuths."""
+    rng = np.random.default_rng(seed)
+    ct = rng.uniform(np.cos(np.deg2rad(hi_deg)), np.cos(np.deg2rad(lo_deg)), n)
+    ph = rng.uniform(-np.pi, np.pi, n)
+    st = np.sqrt(1 - ct**2)
+    return np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
+
+
+def narrow_lobe(u, v) -> np.ndarray:
+    """A diffuse level plus a narrow Beckmann-like lobe in the half vector: ``0.1 + 2 exp(-tan^2(theta_h) / 0.05)``."""
+    h = u + v
+    h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    return 0.1 + 2.0 * np.exp(-(1.0 / h[:, 2] ** 2 - 1.0) / 0.05)
+
+
 def polynomial_data(variables: str, degree: int, n: int = 400, seed: int = 1):
     """Data generated exactly by a polynomial of the model's own form (equation (3)).
 

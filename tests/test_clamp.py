@@ -12,29 +12,15 @@ import pytest
 import polyjax as pj
 
 from _baseline_problems import synthetic_geometry
-
-
-def _directions(n, lo_deg, hi_deg, seed):
-    """``n`` unit directions with polar angles in ``[lo_deg, hi_deg]`` and all azimuths."""
-    rng = np.random.default_rng(seed)
-    ct = rng.uniform(np.cos(np.deg2rad(hi_deg)), np.cos(np.deg2rad(lo_deg)), n)
-    ph = rng.uniform(-np.pi, np.pi, n)
-    st = np.sqrt(1 - ct**2)
-    return np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
-
-
-def _lobe(u, v):
-    h = u + v
-    h = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    return 0.1 + 2.0 * np.exp(-(1.0 / h[:, 2] ** 2 - 1.0) / 0.05)
+from _problems import band_directions, narrow_lobe
 
 
 @pytest.fixture(scope="module")
 def narrow():
     """Samples with polar angles up to 40 degrees (the fitted range), and pairs at 60-85 degrees (outside it)."""
-    u, v = _directions(3000, 0, 40, 1), _directions(3000, 0, 40, 2)
-    uo, vo = _directions(200, 60, 85, 3), _directions(200, 60, 85, 4)
-    return u, v, np.stack([_lobe(u, v), 0.5 * _lobe(u, v)]), uo, vo
+    u, v = band_directions(3000, 0, 40, 1), band_directions(3000, 0, 40, 2)
+    uo, vo = band_directions(200, 60, 85, 3), band_directions(200, 60, 85, 4)
+    return u, v, np.stack([narrow_lobe(u, v), 0.5 * narrow_lobe(u, v)]), uo, vo
 
 
 def _components(model, u, v):

@@ -13,34 +13,21 @@ import pytest
 
 import polyjax as pj
 
-
-def _directions(n, lo_deg, hi_deg, seed):
-    """``n`` unit directions with polar angles in ``[lo_deg, hi_deg]`` and all azimuths."""
-    rng = np.random.default_rng(seed)
-    ct = rng.uniform(np.cos(np.deg2rad(hi_deg)), np.cos(np.deg2rad(lo_deg)), n)
-    ph = rng.uniform(-np.pi, np.pi, n)
-    st = np.sqrt(1 - ct**2)
-    return np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
-
-
-def _lobe(u, v):
-    h = u + v
-    h = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    return 0.1 + 2.0 * np.exp(-(1.0 / h[:, 2] ** 2 - 1.0) / 0.05)
+from _problems import band_directions, narrow_lobe
 
 
 @pytest.fixture(scope="module")
 def fitted():
     """A degree-6 log fit (three lanes) to pairs up to 40 degrees, and pairs at 60-85 degrees, where the polynomial
     diverges (no clamp)."""
-    u, v = _directions(2000, 0, 40, 1), _directions(2000, 0, 40, 2)
-    uo, vo = _directions(200, 60, 85, 3), _directions(200, 60, 85, 4)
+    u, v = band_directions(2000, 0, 40, 1), band_directions(2000, 0, 40, 2)
+    uo, vo = band_directions(200, 60, 85, 3), band_directions(200, 60, 85, 4)
     model = pj.fit_log_polynomial(u, v, _values(u, v), "lafortune", 6, cutoff_deg=None)
     return model, u, v, uo, vo
 
 
 def _values(u, v):
-    return np.stack([_lobe(u, v), 0.5 * _lobe(u, v), 0.25 * _lobe(u, v)])
+    return np.stack([narrow_lobe(u, v), 0.5 * narrow_lobe(u, v), 0.25 * narrow_lobe(u, v)])
 
 
 @pytest.mark.parametrize("shared", [True, False], ids=["one design", "per-lane samples"])
@@ -83,7 +70,7 @@ def test_bound_is_kept_by_saved_files_shards_and_exported_programs(fitted, tmp_p
         back = pj.svbrdf.read_texture_shards(tmp_path / fmt)
         # npz exact; EXR's float32 pairs within 2^-48 relative (polyjax/svbrdf/_exr.py)
         np.testing.assert_allclose(np.asarray(back.log_top), np.asarray(texture.log_top), rtol=4 * 2.0**-48)
-    identity = pj.fit_polynomial(u, v, _lobe(u, v), "lafortune", 3, cutoff_deg=None)
+    identity = pj.fit_polynomial(u, v, narrow_lobe(u, v), "lafortune", 3, cutoff_deg=None)
     assert identity.log_top is None
     assert pj.load_model(pj.save_model(tmp_path / "identity.npz", identity)).log_top is None
 
@@ -125,7 +112,7 @@ def test_bounded_model_derivatives_match_finite_differences(fitted):
         m = pj.fit_log_polynomial(u, v, values, "lafortune", 6, cutoff_deg=None)
         return jnp.sum(m(a, c) * probe)
 
-    y = jnp.asarray(_lobe(u, v))
+    y = jnp.asarray(narrow_lobe(u, v))
     d = jnp.asarray(np.random.default_rng(6).normal(size=y.shape))
     h = 1e-6
     fd = (objective(y + h * d) - objective(y - h * d)) / (2 * h)
