@@ -5,6 +5,7 @@ DiLiGenT's layout with 16-bit PNGs, and loaded back: the float images refit exac
 within the quantisation. The shared capture is loaded and compared with a direct pypng reading.
 """
 
+import dataclasses
 import json
 import os
 import shutil
@@ -308,18 +309,46 @@ def test_diligent_ball_loads(data_root):
 
 
 def test_fit_photos_and_the_api_default_to_the_same_bounded_fit(synthetic, tmp_path, capsys):
-    """``polyjax fit-photos --degree 8`` and ``pj.fit_polynomial_to_images`` with no options make the same model,
-    clamped."""
+    """``polyjax fit-photos`` and ``pj.fit_polynomial_to_images`` with no options make the same model, clamped, at
+    the same degree chosen by the same step-down (``degree="auto"``); ``--degree 8`` and ``degree=8`` keep 8."""
     folder, _ = synthetic
-    path = tmp_path / "m.npz"
-    main(["--no-cache", "fit-photos", str(folder), "--degree", "8", "--json", "--save", str(path)])
-    eight = json.loads(capsys.readouterr().out)  # strict JSON: a rank-deficient fit's condition number is null
-    assert eight["degree"] == 8 and eight["degrees_left_out"] == []
     cap = pj.data.load_photometric(folder).cropped()
     api = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=cap.saturation)
-    saved = pj.load_model(path)
-    assert saved.spec == api.spec and api.clamp and api.link == "log" and api.variables == "rusinkiewicz"
-    np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(api.coefficients), rtol=1e-9, atol=1e-12)
+    for option, model in (([], api), (["--degree", "8"], pj.fit_polynomial_to_images(
+            cap.scenes, cap.images, degree=8, saturation=cap.saturation))):
+        path = tmp_path / "m.npz"
+        main(["--no-cache", "fit-photos", str(folder), *option, "--json", "--save", str(path)])
+        out = json.loads(capsys.readouterr().out)  # strict JSON: a rank-deficient fit's condition number is null
+        saved = pj.load_model(path)
+        assert saved.spec == model.spec and model.clamp and model.link == "log" and model.variables == "rusinkiewicz"
+        assert out["degree"] == model.max_degree
+        np.testing.assert_allclose(np.asarray(saved.coefficients), np.asarray(model.coefficients), rtol=1e-9,
+                                   atol=1e-12)
+    assert out["degrees_left_out"] == [] and model.max_degree == 8
+    assert api.max_degree < 8  # these 8 lights do not determine degree 8
+
+
+def test_the_api_default_degree_is_the_highest_well_conditioned_one(synthetic):
+    """``pj.fit_polynomial_to_images`` with ``degree="auto"`` (the default) keeps the highest degree up to 8 whose
+    fit has full rank and a condition number of at most 50 (the next degree up is not), the same model as that
+    degree given; ``spec=`` fixes the degree; under ``jax.jit`` and for a wrong string it raises a named error."""
+    _, cap = synthetic
+    api = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=1.0)
+    p = api.max_degree
+    assert 1 <= p < 8 and np.all(np.asarray(api.status) == 0) and float(np.max(np.asarray(api.condition))) <= 50
+    higher = pj.fit_polynomial_to_images(cap.scenes, cap.images, degree=p + 1, saturation=1.0)
+    assert np.any(np.asarray(higher.status) != 0) or float(np.max(np.asarray(higher.condition))) > MAX_CONDITION
+    same = pj.fit_polynomial_to_images(cap.scenes, cap.images, degree=p, saturation=1.0)
+    assert same.spec == api.spec
+    np.testing.assert_allclose(np.asarray(api.coefficients), np.asarray(same.coefficients), rtol=1e-12, atol=1e-14)
+    fixed = pj.fit_polynomial_to_images(cap.scenes, cap.images, saturation=1.0,
+                                        spec=dataclasses.replace(api.spec, degree=p + 1))
+    assert fixed.max_degree == p + 1
+    with pytest.raises(pj.InputError, match="degree='auto'.*integer degree"):
+        jax.jit(lambda im: pj.fit_polynomial_to_images(cap.scenes, im, saturation=1.0).coefficients)(
+            jnp.asarray(cap.images))
+    with pytest.raises(pj.InputError, match="degree: expected one non-negative integer or 'auto'"):
+        pj.fit_polynomial_to_images(cap.scenes, cap.images, degree="eight")
 
 
 @pytest.mark.slow

@@ -12,7 +12,6 @@ map), and prints the relative RMS and PSNR.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import inspect
 import json
 import time
@@ -26,6 +25,8 @@ import polyjax as pj
 from .._config import check_model_file, check_output_dir
 from .._errors import InputError
 from .._files import write_atomically
+from ..inverse._degree import MAX_CONDITION, TOP_DEGREE
+from ..inverse._fit import fit_images
 from ..render._image import write_exr, write_png
 from ._args import add_model_options, spec_from_args, strict_json
 from ._capture_out import textures_folder, write_textures_beside
@@ -36,19 +37,12 @@ from ._capture_out import textures_folder, write_textures_beside
 #: 8-nearest-neighbour anchor, clamped; the identity link 0.938x and 0.980x). One source: the API's own defaults
 #: (:func:`polyjax.fit_polynomial_to_images`; its ``weighting="auto"`` is ``"brdf"`` on photographs)
 _API = {k: p.default for k, p in inspect.signature(pj.fit_polynomial_to_images).parameters.items()}
-DEFAULT_SPEC = pj.PolynomialSpec(_API["variables"], _API["degree"], interactions=_API["interactions"],
+#: ``--degree`` left out: the API's ``degree="auto"``, the highest well-conditioned degree up to ``TOP_DEGREE``
+#: (:mod:`polyjax.inverse._degree`)
+DEFAULT_SPEC = pj.PolynomialSpec(_API["variables"], TOP_DEGREE, interactions=_API["interactions"],
                                  link=_API["link"], clamp=_API["clamp"])
 DEFAULTS = dict(DEFAULT_SPEC.to_dict(), weighting="brdf", robust_steps=_API["robust_steps"],
                 cutoff=90.0 if _API["cutoff_deg"] is None else _API["cutoff_deg"])
-#: ``--degree`` left out: the highest degree up to the default whose fit has full rank and a condition number of its
-#: weighted design at most this, in every channel. With few lights the pixels' BRDF samples lie on a few sheets
-#: (under one view, a light's polar angle fixes ``theta_d`` at every pixel), and a high degree swings between them,
-#: rank-deficient or not: on DiLiGenT's objects with 6-8 lights, ``p = 8`` relit held-out lights at relative RMS
-#: 2.3 to 3e27, and the fits this bound leaves out were up to 10^22 times worse than the best degree. Chosen on
-#: the ball, cat and pot1, checked on bear, goblet and pot2: the degree kept is within 1.35x of the best degree's
-#: held-out error on all 21 cases, and 8 itself from 12 lights up on the ball (``benchmarks/RESULTS.md``, "few
-#: lights")
-MAX_CONDITION = 50.0
 
 
 def parse_lights(text: str | None):
@@ -147,10 +141,8 @@ def run_fit_photos(args) -> int:
     t0 = time.perf_counter()
     options = dict(saturation=capture.saturation, cutoff_deg=None if args.cutoff >= 90 else args.cutoff,
                    weighting=args.weighting, robust_steps=args.robust_steps)
-    if not given:
-        model, tried = fit_well_conditioned(capture, spec, **options)
-    else:
-        model, tried = pj.fit_polynomial_to_images(capture.scenes, capture.images, spec=spec, **options), []
+    model, left_out = fit_images(capture.scenes, capture.images, spec, not given, **options)
+    tried = [(p, f"{why} with {capture.n_lights} lights") for p, why in left_out]
     spec = model.spec
     seconds = time.perf_counter() - t0
     status = [pj.RESULTS(int(s)).name for s in np.asarray(model.status)]
@@ -173,24 +165,6 @@ def run_fit_photos(args) -> int:
         print("  one BRDF for the whole object, with the folder's scanned normals; --fit-normals fits the normals "
               "and a spatially varying BRDF from the photographs alone")
     return 0 if all(s == "OK" for s in status) else 1
-
-
-def fit_well_conditioned(capture, spec, **options):
-    """``fit-photos``' fit when ``--degree`` is left out: :func:`polyjax.fit_polynomial_to_images` at ``spec``'s
-    degree, then one degree lower at a time while the fit is rank-deficient or its condition number exceeds
-    :data:`MAX_CONDITION` in a channel, down to degree 1. Returns the model kept and ``[(degree, why), ...]`` of
-    the degrees left out."""
-    tried, p = [], int(spec.degree)
-    while True:
-        model = pj.fit_polynomial_to_images(capture.scenes, capture.images, spec=dataclasses.replace(spec, degree=p),
-                                            **options)
-        names = [pj.RESULTS(int(c)).name for c in np.asarray(model.status)]
-        ok, cond = all(n == "OK" for n in names), float(np.max(np.asarray(model.condition)))
-        if p <= 1 or (ok and cond <= MAX_CONDITION):
-            return model, tried
-        why = f"condition number {cond:.3g} > {MAX_CONDITION:g}" if ok else f"status {', '.join(names)}"
-        tried.append((p, f"{why} with {capture.n_lights} lights"))
-        p -= 1
 
 
 def errors_of(predicted, capture):

@@ -32,6 +32,7 @@ from .._model import RESULTS, SPEC_FIELDS, PolynomialBRDF, PolynomialSpec, spec_
 from .._solve.lstsq import METHODS, weighted_lstsq
 from .._solve.threads import one_lapack_thread
 from .._variables import get_variables
+from ._degree import TOP_DEGREE, step_down
 from ._rows import image_rows
 from ._samples import WEIGHTINGS, fit_samples
 
@@ -41,7 +42,7 @@ def fit_polynomial_to_images(
     scenes: Sequence,
     images: Sequence[ArrayLike] | ArrayLike,
     variables: str = "rusinkiewicz",
-    degree: int = 8,
+    degree: int | str = "auto",
     *,
     target: int = 0,
     pixel_weights: Sequence[ArrayLike] | ArrayLike | None = None,
@@ -97,7 +98,10 @@ def fit_polynomial_to_images(
             target object is a placeholder (not used). Direct lighting only (``max_bounces=0``).
         images: ``(H, W, 3)`` linear RGB radiance per scene (a sequence, or an array ``(n, H, W, 3)``).
         variables: explanatory variables (as in :func:`polyjax.fit_polynomial`).
-        degree: the polynomial degree ``p`` (one integer).
+        degree: the polynomial degree ``p`` (one integer), or ``"auto"`` (the default): the highest degree up to 8
+            whose fit has full rank and a condition number of at most 50 in every channel
+            (:mod:`polyjax.inverse._degree`; fewer lights, a lower degree; ``model.max_degree`` says which). Needs
+            concrete inputs: under ``jax.jit`` or ``jax.grad`` give an integer. With ``spec=``, the spec's degree.
         target: index of the fitted object in each scene's ``objects``.
         pixel_weights: ``(H, W)`` non-negative weights per image (or a scalar per image), 1 by default.
         saturation: pixels with a channel at or above this value are excluded (the clipping level of
@@ -113,9 +117,11 @@ def fit_polynomial_to_images(
             :mod:`polyjax.inverse._samples`), or ``"auto"`` (the default: ``"brdf"`` when every pixel has one light
             sample, photographs under point or directional lights; ``"radiance"`` otherwise).
 
-    **Defaults** (``rusinkiewicz`` p = 8 with interactions, log link, clamped to the fitted box, BRDF-space weights,
-    no grazing cutoff): the configuration measured best on photographs (``benchmarks/bench_photometric.py``, the
-    DiLiGenT ball), the same as ``polyjax fit-photos``; clamped, so no default extrapolates unbounded. Scenes lit by
+    **Defaults** (``rusinkiewicz`` with interactions, p = 8 or lower where the lights do not determine it, the log
+    link, clamped to the fitted box, BRDF-space weights, no grazing cutoff): the configuration measured best on
+    photographs (``benchmarks/bench_photometric.py``, the DiLiGenT ball; the degree's step-down on six DiLiGenT
+    objects, ``benchmarks/bench_log_bound.py``), the same as ``polyjax fit-photos``; clamped, so no default
+    extrapolates unbounded. Scenes lit by
     an environment map (several light samples per pixel) need ``link="identity"``.
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
             their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
@@ -137,8 +143,24 @@ def fit_polynomial_to_images(
         InputError: scenes/images disagree in number or size, an image is not ``(H, W, 3)``, bad options,
             or a scene with inter-reflections.
     """
-    spec = spec_of("fit_polynomial_to_images", spec, _SPEC_DEFAULTS, variables=variables, degree=degree,
-                   basis=basis, interactions=interactions, link=link, eps=eps, clamp=clamp)
+    if isinstance(degree, str) and degree != "auto":
+        raise InputError(f"degree: expected one non-negative integer or 'auto', found {degree!r}")
+    auto = spec is None and isinstance(degree, str)
+    spec = spec_of("fit_polynomial_to_images", spec, _SPEC_DEFAULTS, variables=variables,
+                   degree=TOP_DEGREE if auto else degree, basis=basis, interactions=interactions, link=link, eps=eps,
+                   clamp=clamp)
+    return fit_images(scenes, images, spec, auto, target=target, pixel_weights=pixel_weights, saturation=saturation,
+                      cutoff_deg=cutoff_deg, spp=spp, seed=seed, method=method, rcond=rcond, steps=steps,
+                      weighting=weighting, robust_steps=robust_steps)[0]
+
+
+@one_lapack_thread
+def fit_images(scenes, images, spec: PolynomialSpec, auto: bool, *, target=0, pixel_weights=None, saturation=None,
+               cutoff_deg=None, spp=64, seed=0, method="qr", rcond=None, steps=3, weighting="auto",
+               robust_steps=0) -> tuple[PolynomialBRDF, list[tuple[int, str]]]:
+    """:func:`fit_polynomial_to_images` of the definition ``spec``, its degree fixed or, with ``auto``, the highest
+    well-conditioned one up to it (:func:`polyjax.inverse._degree.step_down`; the image rows made once); returns the
+    model and ``[(degree, why), ...]`` of the degrees left out (``polyjax fit-photos`` prints them)."""
     variables, degree, basis, interactions, link, eps, clamp = (getattr(spec, k) for k in SPEC_FIELDS)
     vs = _check_image_fit_options(variables, degree, basis, method)
     if int(robust_steps) != robust_steps or int(robust_steps) < 0:
@@ -151,20 +173,29 @@ def fit_polynomial_to_images(
                       cutoff_deg=cutoff_deg, spp=spp, seed=seed)
     if weighting == "auto":  # BRDF-space residuals where each pixel is one BRDF sample (point, directional lights)
         weighting = "brdf" if rows.u.shape[1] == 1 else "radiance"
+    fit_at = functools.partial(_fit_rows, rows, vs.name, basis=basis, interactions=bool(interactions), method=method,
+                               rcond=rcond, link=link, eps=eps, steps=steps, weighting=weighting,
+                               robust_steps=int(robust_steps), clamp=clamp)
+    return step_down(fit_at, int(degree)) if auto else (fit_at(int(degree)), [])
+
+
+def _fit_rows(rows, variables, degree, *, basis, interactions, method, rcond, link, eps, steps, weighting,
+              robust_steps, clamp) -> PolynomialBRDF:
+    """The fit of one degree on the image rows ``rows`` (:func:`image_rows`), options checked."""
     if link != "identity" or weighting != "radiance" or robust_steps:
-        options = dict(basis=basis, interactions=bool(interactions), method=method, rcond=rcond)
+        options = dict(basis=basis, interactions=interactions, method=method, rcond=rcond)
         if link == "log":
             options.update(link="log", eps=eps, steps=steps)
-        return with_clamp(fit_samples(rows, vs.name, int(degree), weighting=weighting,
-                                      robust_steps=int(robust_steps), options=options), clamp)
+        return with_clamp(fit_samples(rows, variables, degree, weighting=weighting, robust_steps=robust_steps,
+                                      options=options), clamp)
     u, v, c, y, wpx, keep = rows.u, rows.v, rows.weight, rows.values, rows.pixel_weights, rows.keep
     # one design for the three channels when every light is grey (the same weights in R, G and B)
     shared = False
     if is_concrete(c):
         cn = np.asarray(c)
         shared = bool(np.array_equal(cn[..., 0], cn[..., 1]) and np.array_equal(cn[..., 0], cn[..., 2]))
-    return with_clamp(_solve_images(u, v, c, y, wpx, keep, variables=vs.name, degree=int(degree), basis=basis,
-                                    interactions=bool(interactions), method=method, rcond=rcond, shared=shared), clamp)
+    return with_clamp(_solve_images(u, v, c, y, wpx, keep, variables=variables, degree=degree, basis=basis,
+                                    interactions=interactions, method=method, rcond=rcond, shared=shared), clamp)
 
 
 #: the keyword defaults of :func:`fit_polynomial_to_images` that :class:`polyjax.PolynomialSpec` groups
@@ -232,4 +263,4 @@ def _solve_images(u, v, c, y, wpx, keep, variables, degree, basis, interactions,
     )
 
 
-__all__ = ["fit_polynomial_to_images"]
+__all__ = ["fit_images", "fit_polynomial_to_images"]
