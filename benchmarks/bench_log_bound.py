@@ -12,7 +12,8 @@ conditioned.
 
 Compared in one run, on the same fits: the bounded model, the same model without its bound
 (``dataclasses.replace(model, log_top=None)``) and the default fit, ``degree="auto"`` (bounded too; its time against
-the one fit at ``p = 8``: the step-down fits every degree it leaves out, on the image rows made once). For each
+the one fit at ``p = 8``: the step-down fits every degree it leaves out, on the image rows made once; both timed
+on a second call, their programs compiled). For each
 object (the ball: 48 lights, 16-bit; the five crop8 objects: 96 lights, 8-bit, their scanned normals) ``L`` lights
 are fitted (every ``n / L``-th, from the first) and the ``L`` lights half-way between them held out; the error is
 the relative RMS over the mask's pixels without a saturated channel, as ``polyjax relight`` prints it. Also printed:
@@ -57,6 +58,18 @@ def relit(model, test):
     return errors_of(predicted, test)[1], float(np.max(predicted[keep]) / np.max(images[keep]))
 
 
+def timed(train, **options):
+    """The fit of the lights ``train`` with ``options`` and the seconds of its second call (the first compiles)."""
+    def fit():
+        return pj.fit_polynomial_to_images(train.scenes, train.images, saturation=1.0, **options)
+
+    jax.block_until_ready(fit().coefficients)
+    t0 = time.perf_counter()
+    model = fit()
+    jax.block_until_ready(model.coefficients)
+    return model, time.perf_counter() - t0
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", nargs="+", default=list(OBJECTS), choices=OBJECTS)
@@ -66,25 +79,19 @@ def main():
                              link=DEFAULTS["link"], clamp=DEFAULTS["clamp"])
     print(f"# {spec}; load average {os.getloadavg()[0]:.2f}", flush=True)
     print("| object, lights | p = 8 unbounded: error, max ratio | p = 8 bounded: error, max ratio | bounded / "
-          "unbounded | `degree=\"auto\"` (bounded): degree, error | auto / bounded p = 8 | p = 8 fit s | "
+          "unbounded | `degree=\"auto\"` (bounded): degree, error | auto / bounded p = 8 | p = 8 fit s (warm) | "
           "auto s / p = 8 s |")
     print("|---|---|---|---|---|---|---|---|")
     for name in args.objects:
         capture = pj.data.load_photometric(folder(name)).cropped()
         for n_fit in args.lights:
             train, test = split(capture, n_fit)
-            t0 = time.perf_counter()
-            model = pj.fit_polynomial_to_images(train.scenes, train.images, saturation=1.0, spec=spec)
-            jax.block_until_ready(model.coefficients)
-            seconds = time.perf_counter() - t0
+            model, seconds = timed(train, spec=spec)
             assert model.log_top is not None
             free, free_max = relit(dataclasses.replace(model, log_top=None), test)
             bound, bound_max = relit(model, test)
-            t0 = time.perf_counter()
-            kept = pj.fit_polynomial_to_images(train.scenes, train.images, saturation=1.0)  # degree="auto"
-            jax.block_until_ready(kept.coefficients)
-            auto_s = time.perf_counter() - t0
-            assert kept.spec == dataclasses.replace(spec, degree=kept.max_degree)
+            kept, auto_s = timed(train)
+            assert kept.spec == dataclasses.replace(spec, degree=kept.max_degree)  # degree="auto", the default
             step, _ = relit(kept, test)
             print(f"| {name}, {n_fit} | {free:.4g}, {free_max:.3g} | {bound:.4g}, {bound_max:.3g} | "
                   f"{bound / free:.3f} | {kept.max_degree}, {step:.4g} | {step / bound:.2f} | {seconds:.1f} | "
