@@ -99,6 +99,17 @@ def test_refit_of_rendered_polynomial_recovers_coefficients(which):
     assert np.all(np.isfinite(np.asarray(pr.render(held_out).image)))
 
 
+def test_auto_degree_keeps_the_top_degree_with_radiance_weights():
+    """``degree="auto"`` steps down only on BRDF-space rows (photographs under point lights, where its bound was
+    measured): with radiance weights, under an environment map too, it is degree 8, the same fit as ``degree=8``."""
+    scenes = _mixed_scenes()
+    images = _images(scenes, PHONG)
+    auto = _fit(scenes, images, spp=16)
+    assert auto.max_degree == 8 and float(np.max(np.asarray(auto.condition))) > 50  # above the step-down's bound
+    np.testing.assert_array_equal(np.asarray(auto.coefficients),
+                                  np.asarray(_fit(scenes, images, degree=8, spp=16).coefficients))
+
+
 def test_excluded_pixels_saturated_nonfinite_off_object():
     """Pixels that are saturated, NaN/inf or off the object do not enter the fit (and their number is reported)."""
     scenes = _scenes()

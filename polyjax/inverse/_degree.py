@@ -12,7 +12,10 @@ Measured on DiLiGenT (``benchmarks/bench_log_bound.py``, ``benchmarks/RESULTS.md
 lights the fixed ``p = 8`` relit the held-out lights at relative RMS 1.1-19 (bounded by ``PolynomialBRDF.log_top``;
 3e27 before the bound) where the degree kept here gives 0.095-0.45; the bound of 50 was chosen on the ball, cat and
 pot1 and checked on bear, goblet and pot2 (the degree kept within 1.35x of the best degree's held-out error on all
-21 cases); from 12 lights up on the ball it keeps 8 itself.
+21 cases); from 12 lights up on the ball it keeps 8 itself. Only for fits on the pixels' BRDF samples
+(``weighting="brdf"``, one light sample per pixel), where it was measured: a radiance design summed over an
+environment map's samples is worse conditioned at every degree (a sphere under a sky: 4.7e4 at ``p = 8``, 4.0e2 at
+``p = 4``), and there ``"auto"`` keeps :data:`TOP_DEGREE`.
 """
 
 from __future__ import annotations

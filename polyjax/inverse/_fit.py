@@ -98,10 +98,11 @@ def fit_polynomial_to_images(
             target object is a placeholder (not used). Direct lighting only (``max_bounces=0``).
         images: ``(H, W, 3)`` linear RGB radiance per scene (a sequence, or an array ``(n, H, W, 3)``).
         variables: explanatory variables (as in :func:`polyjax.fit_polynomial`).
-        degree: the polynomial degree ``p`` (one integer), or ``"auto"`` (the default): the highest degree up to 8
-            whose fit has full rank and a condition number of at most 50 in every channel
-            (:mod:`polyjax.inverse._degree`; fewer lights, a lower degree; ``model.max_degree`` says which). Needs
-            concrete inputs: under ``jax.jit`` or ``jax.grad`` give an integer. With ``spec=``, the spec's degree.
+        degree: the polynomial degree ``p`` (one integer), or ``"auto"`` (the default): with BRDF-space weights
+            (``weighting="brdf"``, the default for photographs) the highest degree up to 8 whose fit has full rank
+            and a condition number of at most 50 in every channel (:mod:`polyjax.inverse._degree`; fewer lights, a
+            lower degree; ``model.max_degree`` says which), with radiance weights 8. Needs concrete inputs: under
+            ``jax.jit`` or ``jax.grad`` give an integer. With ``spec=``, the spec's degree.
         target: index of the fitted object in each scene's ``objects``.
         pixel_weights: ``(H, W)`` non-negative weights per image (or a scalar per image), 1 by default.
         saturation: pixels with a channel at or above this value are excluded (the clipping level of
@@ -176,7 +177,12 @@ def fit_images(scenes, images, spec: PolynomialSpec, auto: bool, *, target=0, pi
     fit_at = functools.partial(_fit_rows, rows, vs.name, basis=basis, interactions=bool(interactions), method=method,
                                rcond=rcond, link=link, eps=eps, steps=steps, weighting=weighting,
                                robust_steps=int(robust_steps), clamp=clamp)
-    return step_down(fit_at, int(degree)) if auto else (fit_at(int(degree)), [])
+    # the step-down's bound was measured on BRDF-space rows (one light sample per pixel); a radiance design summed
+    # over an environment's samples is smoother and worse conditioned at every degree (p = 8: 5e4 where four point
+    # lights give 5e2), so there "auto" keeps the top degree
+    if auto and weighting == "brdf":
+        return step_down(fit_at, int(degree))
+    return fit_at(int(degree)), []
 
 
 def _fit_rows(rows, variables, degree, *, basis, interactions, method, rcond, link, eps, steps, weighting,
