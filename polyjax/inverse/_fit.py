@@ -122,8 +122,8 @@ def fit_polynomial_to_images(
     link, clamped to the fitted box, BRDF-space weights, no grazing cutoff): the configuration measured best on
     photographs (``benchmarks/bench_photometric.py``, the DiLiGenT ball; the degree's step-down on six DiLiGenT
     objects, ``benchmarks/bench_log_bound.py``), the same as ``polyjax fit-photos``; clamped, so no default
-    extrapolates unbounded. Scenes lit by
-    an environment map (several light samples per pixel) need ``link="identity"``.
+    extrapolates unbounded. Scenes lit by an environment map (several light samples per pixel) need
+    ``link="identity"``.
         robust_steps: reweighted solves after the first (Tukey's biweight of the relative residuals, scale from
             their MAD: :mod:`polyjax.inverse._samples`); 0: none. One light sample per pixel.
         clamp: the model evaluates its polynomial at the scaled components clamped to the box of the fitted
