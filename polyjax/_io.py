@@ -16,7 +16,8 @@ not registered yet.
 
 **Files.** Saving and loading fitted models (``.npz`` or ``.json``), bit-exact.
 
-File format (version 2): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
+File format (version 2, or 3 for a file holding a log-link polynomial's bound ``log_top``, which older readers
+would ignore: they refuse version 3): a JSON header ``{"format": "polyjax.model", "version": 2, "kind": <kind>,
 "static": {...}}`` and named arrays. In ``.npz`` the header is the string array ``__meta__`` and every
 array is stored under its name; in ``.json`` the header's keys are at the top level and
 ``"arrays": {name: {"dtype", "shape", "data"}}`` holds the arrays (floats in exact ``repr``; inf and NaN as the
@@ -223,7 +224,12 @@ def fitter_for(name: str) -> tuple[ModelKind, str]:
 
 
 FORMAT = "polyjax.model"
-VERSION = 2
+#: the newest version this polyjax reads and writes
+VERSION = 3
+#: arrays that a reader of an older version would not evaluate the same (it ignores arrays it does not know), and
+#: the least version that knows them: a file holding one is written with that version, which older readers refuse
+#: ("written by a newer polyjax") instead of evaluating differently; every other file is version 2
+_VERSION_OF_ARRAY = {"log_top": 3}
 #: version 1: polynomial models only
 FORMAT_V1 = "polyjax.PolynomialBRDF"
 _STATIC_V1 = ("variables", "basis", "interactions", "max_degree")
@@ -259,7 +265,8 @@ def save_model(path: str | os.PathLike, model, *, metadata: dict | None = None) 
                          f"{path.suffix or '(none)'!r}")
     kind = kind_of(model)
     static, arrays = kind.to_arrays(model)
-    meta = {"format": FORMAT, "version": VERSION, "kind": kind.kind, "static": static}
+    version = max([2] + [_VERSION_OF_ARRAY.get(k, 2) for k in arrays])
+    meta = {"format": FORMAT, "version": version, "kind": kind.kind, "static": static}
     if metadata is not None:
         meta["metadata"] = _checked_metadata(metadata)
     if path.suffix == ".json":

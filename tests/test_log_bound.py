@@ -73,13 +73,19 @@ def test_bound_is_kept_by_saved_files_shards_and_exported_programs(fitted, tmp_p
     identity = pj.fit_polynomial(u, v, narrow_lobe(u, v), "lafortune", 3, cutoff_deg=None)
     assert identity.log_top is None
     assert pj.load_model(pj.save_model(tmp_path / "identity.npz", identity)).log_top is None
+    # a bounded file is version 3, which a reader of version 2 refuses instead of evaluating it unbounded
+    versions = [json.loads(pj.save_model(tmp_path / f"{n}.json", m).read_text())["version"]
+                for n, m in (("bounded", model), ("identity", identity))]
+    assert versions == [3, 2]
 
 
 def test_a_file_saved_without_the_bound_loads_unbounded_and_a_bad_bound_is_named(fitted, tmp_path):
-    """A model saved before the field existed (no ``log_top``) loads without a bound; a bound of the wrong shape, a
-    NaN or a bound on an identity-link model is a DataFormatError naming the file."""
+    """A model saved before the field existed (no ``log_top``, version 2) loads without a bound; a bound of the
+    wrong shape, a NaN or a bound on an identity-link model is a DataFormatError naming the file."""
     model = fitted[0]
-    old = pj.load_model(pj.save_model(tmp_path / "old.npz", dataclasses.replace(model, log_top=None)))
+    path = pj.save_model(tmp_path / "old.json", dataclasses.replace(model, log_top=None))
+    assert json.loads(path.read_text())["version"] == 2
+    old = pj.load_model(path)
     assert old.log_top is None and old.link == "log"
     path = pj.save_model(tmp_path / "m.json", model)
     text = json.loads(path.read_text())

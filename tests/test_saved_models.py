@@ -78,8 +78,8 @@ def test_old_version_1_files_still_load(tmp_path):
 
 def test_newer_version_and_unknown_kind_are_clear_errors(tmp_path, ward_fit):
     doc = json.loads(pj.save_model(tmp_path / "w.json", ward_fit).read_text())
-    (tmp_path / "new.json").write_text(json.dumps(dict(doc, version=3)))
-    with pytest.raises(pj.DataFormatError, match="version 3"):
+    (tmp_path / "new.json").write_text(json.dumps(dict(doc, version=4)))
+    with pytest.raises(pj.DataFormatError, match="version 4"):
         pj.load_model(tmp_path / "new.json")
     (tmp_path / "other.json").write_text(json.dumps(dict(doc, kind="someone.Else")))
     with pytest.raises(pj.UnknownNameError, match="someone.Else.*polyjax.models"):
