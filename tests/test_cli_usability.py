@@ -203,7 +203,8 @@ def test_fit_subsample_of_a_data_set_off_the_merl_grid_is_an_error(capsys, tmp_p
 
 
 @pytest.mark.parametrize("to, good, bad", [("merl", "m.binary", "m.txt"), ("glsl", "m.frag", "m.brdf"),
-                                           ("brdf-explorer", "m.brdf", "m.glsl"), ("mitsuba", "m.py", "m.txt")])
+                                           ("brdf-explorer", "m.brdf", "m.glsl"), ("mitsuba", "m.py", "m.txt"),
+                                           ("rgl-bsdf", "m.bsdf", "m.binary")])
 def test_export_out_must_end_in_the_target_s_suffix(capsys, tmp_path, two_merl, to, good, bad):
     """``export --to merl --out m.txt`` wrote a MERL table named ``.txt``; a file of the wrong suffix is now refused
     before the model is read, as the standard targets' writers and ``--save`` refuse theirs."""

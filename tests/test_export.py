@@ -16,6 +16,7 @@ import pytest
 
 import polyjax as pj
 import polyjax.export as ex
+from polyjax.export._rgl_bsdf import RESOLUTION, table_directions
 
 from _problems import LazyModels
 from _sampling_problems import GRAZING, NORMAL, OBLIQUE, TABLE, cook_torrance, glossy_polynomial, neural, ward
@@ -471,7 +472,8 @@ def test_cli_export_every_format(tmp_path, capsys):
 
     model = MODELS["ward"]
     src = pj.save_model(tmp_path / "fit.npz", model)
-    for fmt, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf"), ("merl", ".binary"), ("mitsuba", ".py")):
+    for fmt, suffix in (("glsl", ".glsl"), ("brdf-explorer", ".brdf"), ("merl", ".binary"), ("mitsuba", ".py"),
+                        ("rgl-bsdf", ".bsdf")):
         assert main(["export", str(src), "--to", fmt]) == 0
         out = src.with_suffix(suffix)
         assert out.is_file() and f"wrote {out}" in capsys.readouterr().out
@@ -479,6 +481,11 @@ def test_cli_export_every_format(tmp_path, capsys):
     values, _ = pj.data.read_merl_binary(src.with_suffix(".binary"))
     u, v, _, above = pj.data.merl_grid()
     np.testing.assert_allclose(values[:, above], np.maximum(_rgb(model, u[above], v[above]), 0.0).T, rtol=1e-9)
+    tables = pj.data.read_rgl(src.with_suffix(".bsdf"))  # at its nodes, the model itself (float32)
+    wi, wo, _, _ = table_directions(*RESOLUTION)
+    keep = wo[7, ..., 2] > 0.05
+    np.testing.assert_allclose(np.asarray(tables(wo[7][keep], wi[7][keep])).T,
+                               np.maximum(_rgb(model, wo[7][keep], wi[7][keep]), 0.0), rtol=3e-6, atol=1e-7)
     ns = {}
     exec(src.with_suffix(".py").read_text(), ns)
     assert ns["MODEL"] == src.name and callable(ns["register"])  # beside it: relative to the plugin

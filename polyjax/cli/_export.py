@@ -1,4 +1,5 @@
-"""``polyjax export MODEL --to mitsuba|brdf-explorer|glsl|merl --out PATH``: a saved model in another renderer."""
+"""``polyjax export MODEL --to mitsuba|brdf-explorer|glsl|merl|rgl-bsdf --out PATH``: a saved model in another
+renderer."""
 
 from __future__ import annotations
 
@@ -18,12 +19,14 @@ from ..export._glsl import brdf_explorer, glsl
 from ..export._merl import NotReciprocalWarning, merl_binary
 from ..export._mitsuba_name import check_plugin_name
 from ..export._rgl import is_rgl_source, rgl_to_merl
+from ..export._rgl_bsdf import NotSymmetricWarning, rgl_bsdf
 from ..render._brdf import rgb_brdf
 from ._export_standard import TARGETS, add_standard_arguments, run_standard_export
 
 #: the suffixes ``--out`` may end in for each target written here, the default first (the standard targets'
 #: writers check their own)
-SUFFIXES = {"mitsuba": (".py",), "brdf-explorer": (".brdf",), "glsl": (".glsl", ".frag"), "merl": (".binary",)}
+SUFFIXES = {"mitsuba": (".py",), "brdf-explorer": (".brdf",), "glsl": (".glsl", ".frag"), "merl": (".binary",),
+            "rgl-bsdf": (".bsdf",)}
 #: target -> the default suffix of its output
 FORMATS = {to: suffixes[0] for to, suffixes in SUFFIXES.items()}
 
@@ -125,14 +128,9 @@ def run_export(args) -> int:
     elif args.to == "brdf-explorer":
         brdf_explorer(model, out)
     elif args.to == "merl":
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", NotReciprocalWarning)
-            merl_binary(model, out)
-        for w in caught:  # ours as one line on stderr, as the command's other messages; any other as it came
-            if issubclass(w.category, NotReciprocalWarning):
-                print(f"polyjax: warning: {w.message}", file=sys.stderr)
-            else:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        _warning_lines(lambda: merl_binary(model, out), NotReciprocalWarning)
+    elif args.to == "rgl-bsdf":
+        _warning_lines(lambda: rgl_bsdf(model, out, description=f"polyjax export of {src.name}"), NotSymmetricWarning)
     else:
         if isinstance(model, pj.PolynomialBRDF):
             program(model)  # fail now, not inside Mitsuba, on models that cannot be exported
@@ -142,6 +140,19 @@ def run_export(args) -> int:
         write_bytes_atomically(out, text.encode())
     print(f"wrote {out} ({args.to})")
     return 0
+
+
+def _warning_lines(write, category) -> None:
+    """``write()``, its warnings of ``category`` printed as one line on stderr, as the command's other messages; any
+    other warning as it came."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", category)
+        write()
+    for w in caught:
+        if issubclass(w.category, category):
+            print(f"polyjax: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
 def _output_file(args, default: Path) -> Path:

@@ -11,6 +11,8 @@ Layout (little-endian):
 :func:`read_tensor_file` checks every byte count against the file's size before reading, so a truncated or foreign
 file is a :class:`polyjax.DataFormatError` naming the file, never a short read; the file itself is read only when its
 size is within the input cap (``POLYJAX_MAX_INPUT_MB``), and a field with a zero-sized dimension is refused.
+:func:`write_tensor_file` writes the same layout (each field's data 8-byte aligned, as Mitsuba's own writer), whole
+or not at all.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import DataNotFoundError
+from .._errors import DataNotFoundError, InputError
+from .._files import write_bytes_atomically
 from .._reading.bounded import read_bytes
 from ._errors import EmptyFileError, HeaderError, TruncatedFileError, WrongFormatError
 
@@ -121,3 +124,45 @@ def read_tensor_file(path: str | os.PathLike) -> dict[str, np.ndarray]:
         fields[name] = values
     return fields
 
+
+
+#: numpy dtypes -> Mitsuba ``Struct`` type codes (the inverse of :data:`DTYPES`)
+_CODES = {np.dtype(v): k for k, v in DTYPES.items()}
+
+
+def tensor_file_bytes(fields: dict[str, np.ndarray]) -> bytes:
+    """The bytes of a ``tensor_file`` holding ``fields`` (``{ASCII name: array}``, in order; module docstring).
+
+    Raises:
+        InputError: a name that is not ASCII or over 65,535 bytes, a dtype without a ``tensor_file`` code, an empty
+            array or more than 16 dimensions.
+    """
+    arrays = {}
+    for name, a in fields.items():
+        a = np.ascontiguousarray(a)
+        a = a.astype(a.dtype.newbyteorder("<")) if a.dtype.byteorder == ">" else a
+        if not name.isascii() or not 0 < len(name) < 1 << 16:
+            raise InputError(f"tensor_file field {name!r}: expected a non-empty ASCII name")
+        if a.dtype not in _CODES or a.size == 0 or a.ndim > _MAX_NDIM:
+            raise InputError(f"tensor_file field {name!r}: expected a non-empty array of at most {_MAX_NDIM} "
+                             f"dimensions of one of {sorted(str(d) for d in _CODES)}, found {a.dtype} {a.shape}")
+        arrays[name] = a
+    pos = len(MAGIC) + 6 + sum(2 + len(k) + 11 + 8 * a.ndim for k, a in arrays.items())
+    offsets = []
+    for a in arrays.values():
+        pos += -pos % 8
+        offsets.append(pos)
+        pos += a.nbytes
+    out = bytearray(MAGIC + bytes((1, 0)) + np.uint32(len(arrays)).astype("<u4").tobytes())
+    for (name, a), offset in zip(arrays.items(), offsets):
+        out += np.uint16(len(name)).astype("<u2").tobytes() + name.encode("ascii")
+        out += np.uint16(a.ndim).astype("<u2").tobytes() + bytes((_CODES[a.dtype],))
+        out += np.uint64(offset).astype("<u8").tobytes() + np.asarray(a.shape, "<u8").tobytes()
+    for a, offset in zip(arrays.values(), offsets):
+        out += bytes(offset - len(out)) + a.tobytes()
+    return bytes(out)
+
+
+def write_tensor_file(path: str | os.PathLike, fields: dict[str, np.ndarray]) -> Path:
+    """Write ``fields`` as a ``tensor_file`` at ``path`` (:func:`tensor_file_bytes`), atomically; returns the path."""
+    return write_bytes_atomically(path, tensor_file_bytes(fields))
