@@ -83,6 +83,8 @@ def main():
           "auto s / p = 8 s |")
     print("|---|---|---|---|---|---|---|---|")
     for name in args.objects:
+        jax.clear_caches()  # each object's shapes compile their own programs: a process keeping them all reaches
+        # the kernel's limit on memory maps (about 3 per compiled CPU program; tests/conftest.py)
         capture = pj.data.load_photometric(folder(name)).cropped()
         for n_fit in args.lights:
             train, test = split(capture, n_fit)
