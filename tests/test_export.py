@@ -16,7 +16,6 @@ import pytest
 
 import polyjax as pj
 import polyjax.export as ex
-from polyjax.export._rgl_bsdf import RESOLUTION, table_directions
 
 from _problems import LazyModels
 from _sampling_problems import GRAZING, NORMAL, OBLIQUE, TABLE, cook_torrance, glossy_polynomial, neural, ward
@@ -482,7 +481,7 @@ def test_cli_export_every_format(tmp_path, capsys):
     u, v, _, above = pj.data.merl_grid()
     np.testing.assert_allclose(values[:, above], np.maximum(_rgb(model, u[above], v[above]), 0.0).T, rtol=1e-9)
     tables = pj.data.read_rgl(src.with_suffix(".bsdf"))  # at its nodes, the model itself (float32)
-    wi, wo, _, _ = table_directions(*RESOLUTION)
+    wi, wo, _, _ = ex.rgl_table_directions(*ex.RGL_RESOLUTION)
     keep = wo[7, ..., 2] > 0.05
     np.testing.assert_allclose(np.asarray(tables(wo[7][keep], wi[7][keep])).T,
                                np.maximum(_rgb(model, wo[7][keep], wi[7][keep]), 0.0), rtol=3e-6, atol=1e-7)

@@ -8,7 +8,6 @@ import pytest
 
 import polyjax as pj
 import polyjax.render as pr
-from polyjax.export._rgl_bsdf import table_directions
 
 from _rgl_problems import hemisphere, mitsuba_measured
 
@@ -29,7 +28,7 @@ def test_the_file_holds_the_model_at_its_nodes_and_close_between(tmp_path):
     path = pj.export.rgl_bsdf(PHONG, tmp_path / "phong.bsdf", resolution=(32, 64), description="a Phong lobe")
     back = pj.data.read_rgl(path)
     assert back.isotropic and back.jacobian and back.description == "a Phong lobe"
-    wi, wo, _, theta = table_directions(32, 64)
+    wi, wo, _, theta = pj.export.rgl_table_directions(32, 64)
     for t in (0, 10, 25):
         keep = wo[t, ..., 2] > 0.05
         want = np.asarray(pr.evaluate_rgb(PHONG, wo[t][keep], wi[t][keep]))

@@ -17,12 +17,15 @@ from ._mitsuba import mitsuba_bsdf, register_mitsuba_bsdf
 from ._mitsuba_choice import choose_plugin as choose_mitsuba_plugin
 from ._mitsuba_xml import mitsuba_xml
 from ._normal_map import decode_normals, encode_normals, normal_map
+from ._rgl_bsdf import RESOLUTION as RGL_RESOLUTION
 from ._rgl_bsdf import NotSymmetricWarning, rgl_bsdf
+from ._rgl_bsdf import table_directions as rgl_table_directions
 from ._texture import png_bytes, srgb_encode, write_texture
 from ._usd import usd
 
-__all__ = ["CardMaps", "GGXLobes", "NotReciprocalWarning", "NotSymmetricWarning", "brdf_explorer",
+__all__ = ["CardMaps", "GGXLobes", "NotReciprocalWarning", "NotSymmetricWarning", "RGL_RESOLUTION", "brdf_explorer",
            "capture_directions", "card_maps", "choose_mitsuba_plugin", "decode_normals", "encode_normals",
            "fit_ggx_lobes", "ggx_specular", "glsl", "gltf", "gltf_card", "materialx", "merl_binary", "mitsuba_bsdf",
            "mitsuba_xml", "normal_map", "numpy_function", "png_bytes", "register_mitsuba_bsdf", "render_card",
-           "rgl_bsdf", "srgb_encode", "tabulate_merl", "usd", "write_capture_textures", "write_texture"]
+           "rgl_bsdf", "rgl_table_directions", "srgb_encode", "tabulate_merl", "usd", "write_capture_textures",
+           "write_texture"]
