@@ -114,7 +114,7 @@ def rgl_fields(brdf, resolution=RESOLUTION, description: str = "") -> dict[str, 
                       "may read mirrored, holds their mean", NotSymmetricWarning, stacklevel=3)
         table = 0.5 * (table + mirrored)
     x = np.linspace(0.0, 1.0, size)[None, None, :]
-    sin_m = np.sin(x**2 * (np.pi / 2))
+    sin_m = np.linalg.norm(wm[..., :2], axis=-1)  # the nodes' own half vectors: sin(theta_m)
     dot = np.maximum(np.sum(wi * wm, -1), 0.0)
     lum = np.einsum("c,tcji->tji", _Y, table) * np.maximum(2 * np.pi**2 * x * sin_m, 1e-6) * 4.0 * dot
     lum = np.maximum(lum, 0.0)
@@ -126,7 +126,7 @@ def rgl_fields(brdf, resolution=RESOLUTION, description: str = "") -> dict[str, 
         "phi_i": f32([0.0]), "theta_i": f32(theta_i),
         "ndf": f32(np.ones((2, 2))), "sigma": f32(np.full((2, 2), 0.25)),
         "vndf": f32(np.ones((1, n_theta, 2, 2))), "luminance": f32(lum[None]),
-        "rgb": f32(np.maximum(table, 0.0)[None]), "jacobian": np.array([1], np.uint8),
+        "rgb": f32(table[None]), "jacobian": np.array([1], np.uint8),  # max(f, 0) already: evaluate_rgb
     }
 
 
